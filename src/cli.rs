@@ -1,0 +1,85 @@
+//! Command-line arguments (clap derive): raw values only, validated elsewhere.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+
+use crate::scene_file::{DtValue, Overrides};
+use crate::sim::Broadphase;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "collide",
+    version,
+    about = "2D hard-disk collision simulator and scaling-study harness"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run one scene and print a summary of what happened.
+    Simulate(SimulateArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct SimulateArgs {
+    /// Scene file (TOML), e.g. experiments/scenes/seed-1000.toml.
+    pub scene: PathBuf,
+    /// Print one JSON object on the last line of stdout instead of the text summary.
+    #[arg(long)]
+    pub json: bool,
+    /// Write the final state as CSV (id,x,y,vx,vy,radius,mass) to FILE.
+    #[arg(long, value_name = "FILE")]
+    pub dump: Option<PathBuf>,
+    /// Number of disks (random scenes).
+    #[arg(long, allow_hyphen_values = true)]
+    pub n: Option<i64>,
+    /// Number of steps.
+    #[arg(long, allow_hyphen_values = true)]
+    pub steps: Option<i64>,
+    /// Seed of the random initial state.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Time step, or "auto".
+    #[arg(long, value_parser = parse_dt, allow_hyphen_values = true)]
+    pub dt: Option<DtValue>,
+    /// Area fraction of disks (random scenes; the box becomes square).
+    #[arg(long, allow_hyphen_values = true)]
+    pub packing: Option<f64>,
+    /// Broad phase: grid (default) or allpairs (the seed's O(N²) search).
+    #[arg(long, value_parser = parse_broadphase)]
+    pub broadphase: Option<Broadphase>,
+}
+
+impl SimulateArgs {
+    pub fn overrides(&self) -> Overrides {
+        Overrides {
+            n: self.n,
+            steps: self.steps,
+            seed: self.seed,
+            dt: self.dt.clone(),
+            packing: self.packing,
+            broadphase: self.broadphase,
+        }
+    }
+}
+
+fn parse_dt(text: &str) -> Result<DtValue, String> {
+    if text == "auto" {
+        return Ok(DtValue::Word(text.to_owned()));
+    }
+    text.parse::<f64>()
+        .map(DtValue::Seconds)
+        .map_err(|_| format!("expected a number or \"auto\", got \"{text}\""))
+}
+
+fn parse_broadphase(text: &str) -> Result<Broadphase, String> {
+    match text {
+        "grid" => Ok(Broadphase::Grid),
+        "allpairs" => Ok(Broadphase::AllPairs),
+        _ => Err(format!("expected grid or allpairs, got \"{text}\"")),
+    }
+}

@@ -1,0 +1,13 @@
+//! collide: a deterministic 2D hard-disk collision simulator and the harness that
+//! times it under serial, threaded and distributed backends.
+//!
+//! Arrows point one way: `app` → `backend` → `sim`. `sim` is pure.
+
+pub mod app;
+pub mod backend;
+pub mod cli;
+pub mod output;
+pub mod scene_file;
+pub mod sim;
+pub mod spec;
+pub mod summary;

@@ -1,0 +1,683 @@
+//! Scene files (TOML) → validated [`RunSpec`]; every error names the file, line, field and fix.
+//!
+//! Command-line overrides (`--n`, `--steps`, ...) are applied before validation, so a bad
+//! override is reported against its flag rather than against the file.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::sim::grid::CellGrid;
+use crate::sim::scene::{
+    Extent, GasSpec, MassRule, Placement, RSA_JAMMING_PACKING, RadiusDistribution,
+    check_periodic_box,
+};
+use crate::sim::{Boundary, Broadphase, Disk, Domain, Particles, Physics, Scene};
+use crate::spec::{DEFAULT_DT_FRACTION, DtChoice, MethodSpec, RunSpec, SceneSource};
+
+/// Values given on the command line that replace the scene file's.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Overrides {
+    pub n: Option<i64>,
+    pub steps: Option<i64>,
+    pub seed: Option<u64>,
+    pub dt: Option<DtValue>,
+    pub packing: Option<f64>,
+    pub broadphase: Option<Broadphase>,
+}
+
+/// A time step as written: a number or the word "auto".
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum DtValue {
+    Seconds(f64),
+    Word(String),
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum SceneFileError {
+    #[error("cannot read scene file {path}: {source}; check the path")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error(
+        "{path}:{line}: {message}; fix the syntax or remove unknown keys (see README, \"Scene files\")"
+    )]
+    Syntax {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
+    #[error("{location}: `{field}` {problem}; {fix}")]
+    Invalid {
+        location: String,
+        field: String,
+        problem: String,
+        fix: String,
+    },
+}
+
+/// Reads and validates a scene file, applying overrides.
+pub fn load(path: &Path, overrides: &Overrides) -> Result<RunSpec, SceneFileError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SceneFileError::Read {
+        path: path.to_owned(),
+        source,
+    })?;
+    parse(path, &text, overrides)
+}
+
+/// Validates scene-file text; `path` is only used in messages.
+pub fn parse(path: &Path, text: &str, overrides: &Overrides) -> Result<RunSpec, SceneFileError> {
+    let raw: RawFile = toml::from_str(text).map_err(|err| SceneFileError::Syntax {
+        path: path.to_owned(),
+        line: err.span().map_or(1, |span| line_of(text, span.start)),
+        message: err.message().trim_end().to_owned(),
+    })?;
+    let validator = Validator { path, text };
+    let method = validator.method(&raw.method, overrides)?;
+    let scene = if raw.scene.particle.is_some() {
+        validator.explicit_scene(&raw.scene, overrides)?
+    } else {
+        SceneSource::Gas(validator.gas(&raw.scene, overrides)?)
+    };
+    Ok(RunSpec { scene, method })
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    scene: RawScene,
+    #[serde(default)]
+    method: RawMethod,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScene {
+    n: Option<Spanned<i64>>,
+    packing: Option<Spanned<f64>>,
+    size: Option<Spanned<Vec<f64>>>,
+    radius: Option<Spanned<RawRadius>>,
+    mass: Option<Spanned<RawMass>>,
+    speed_rms: Option<Spanned<f64>>,
+    restitution: Option<Spanned<f64>>,
+    wall_restitution: Option<Spanned<f64>>,
+    boundary: Option<Spanned<Boundary>>,
+    seed: Option<Spanned<u64>>,
+    gravity: Option<Spanned<Vec<f64>>>,
+    placement: Option<Spanned<Placement>>,
+    particle: Option<Vec<Spanned<RawParticle>>>,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum RawRadius {
+    Fixed(f64),
+    Range { min: f64, max: f64 },
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum RawMass {
+    Fixed(f64),
+    Rule(String),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawParticle {
+    x: f64,
+    y: f64,
+    #[serde(default)]
+    vx: f64,
+    #[serde(default)]
+    vy: f64,
+    radius: Option<f64>,
+    mass: Option<f64>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawMethod {
+    dt: Option<Spanned<DtValue>>,
+    dt_fraction: Option<Spanned<f64>>,
+    steps: Option<Spanned<i64>>,
+    broadphase: Option<Spanned<Broadphase>>,
+}
+
+/// Where a value came from, for error messages.
+#[derive(Clone, Copy)]
+enum Origin {
+    File(usize),
+    Flag(&'static str),
+    Default,
+}
+
+/// A value with its origin: from an override flag, else from the file, else absent.
+struct Sourced<T> {
+    value: T,
+    origin: Origin,
+}
+
+struct Validator<'a> {
+    path: &'a Path,
+    text: &'a str,
+}
+
+impl Validator<'_> {
+    fn origin(&self, span: Range<usize>) -> Origin {
+        Origin::File(line_of(self.text, span.start))
+    }
+
+    /// The override if given, else the file's value.
+    fn pick<T: Clone, U>(
+        &self,
+        flag: &'static str,
+        from_flag: Option<T>,
+        from_file: &Option<Spanned<U>>,
+        convert: impl Fn(&U) -> T,
+    ) -> Option<Sourced<T>> {
+        match (from_flag, from_file) {
+            (Some(value), _) => Some(Sourced {
+                value,
+                origin: Origin::Flag(flag),
+            }),
+            (None, Some(spanned)) => Some(Sourced {
+                value: convert(spanned.get_ref()),
+                origin: self.origin(spanned.span()),
+            }),
+            (None, None) => None,
+        }
+    }
+
+    fn from_file<T: Clone>(&self, value: &Option<Spanned<T>>) -> Option<Sourced<T>> {
+        value.as_ref().map(|spanned| Sourced {
+            value: spanned.get_ref().clone(),
+            origin: self.origin(spanned.span()),
+        })
+    }
+
+    fn invalid(&self, origin: Origin, field: &str, problem: String, fix: &str) -> SceneFileError {
+        let location = match origin {
+            Origin::File(line) => format!("{}:{line}", self.path.display()),
+            Origin::Flag(flag) => format!("{} (from {flag})", self.path.display()),
+            Origin::Default => self.path.display().to_string(),
+        };
+        SceneFileError::Invalid {
+            location,
+            field: field.to_owned(),
+            problem,
+            fix: fix.to_owned(),
+        }
+    }
+
+    fn method(&self, raw: &RawMethod, overrides: &Overrides) -> Result<MethodSpec, SceneFileError> {
+        let fraction = match self.from_file(&raw.dt_fraction) {
+            Some(Sourced { value, origin }) => {
+                if !(value > 0.0 && value <= 1.0) {
+                    return Err(self.invalid(
+                        origin,
+                        "method.dt_fraction",
+                        format!("is {value}, outside (0, 1]"),
+                        "give the largest step as a fraction of the smallest radius, e.g. dt_fraction = 0.1",
+                    ));
+                }
+                value
+            }
+            None => DEFAULT_DT_FRACTION,
+        };
+        let dt = match self.pick("--dt", overrides.dt.clone(), &raw.dt, Clone::clone) {
+            None => DtChoice::Auto { fraction },
+            Some(Sourced { value, origin }) => match value {
+                DtValue::Word(word) if word == "auto" => DtChoice::Auto { fraction },
+                DtValue::Seconds(dt) if dt > 0.0 && dt.is_finite() => DtChoice::Fixed(dt),
+                DtValue::Seconds(dt) => {
+                    return Err(self.invalid(
+                        origin,
+                        "method.dt",
+                        format!("is {dt}, not a positive number"),
+                        "give a positive time step, e.g. dt = 0.01, or dt = \"auto\"",
+                    ));
+                }
+                DtValue::Word(word) => {
+                    return Err(self.invalid(
+                        origin,
+                        "method.dt",
+                        format!("is \"{word}\""),
+                        "give a positive number or \"auto\"",
+                    ));
+                }
+            },
+        };
+        let steps = match self.pick("--steps", overrides.steps, &raw.steps, |s| *s) {
+            None => {
+                return Err(self.invalid(
+                    Origin::Default,
+                    "method.steps",
+                    "is missing".to_owned(),
+                    "add `steps = 400` under [method] or pass --steps",
+                ));
+            }
+            Some(Sourced { value, origin }) => u64::try_from(value)
+                .ok()
+                .filter(|&steps| steps >= 1)
+                .ok_or_else(|| {
+                    self.invalid(
+                        origin,
+                        "method.steps",
+                        format!("is {value}, not a positive whole number"),
+                        "give at least 1 step",
+                    )
+                })?,
+        };
+        let broadphase = self
+            .pick("--broadphase", overrides.broadphase, &raw.broadphase, |b| {
+                *b
+            })
+            .map_or(Broadphase::Grid, |sourced| sourced.value);
+        Ok(MethodSpec {
+            dt,
+            steps,
+            broadphase,
+        })
+    }
+
+    fn physics(&self, raw: &RawScene) -> Result<Physics, SceneFileError> {
+        let coefficient = |value: &Option<Spanned<f64>>, field: &str| match self.from_file(value) {
+            None => Ok(1.0),
+            Some(Sourced { value, origin }) if !(0.0..=1.0).contains(&value) => Err(self.invalid(
+                origin,
+                field,
+                format!("is {value}, outside [0, 1]"),
+                "give a restitution between 0 (perfectly inelastic) and 1 (elastic)",
+            )),
+            Some(Sourced { value, .. }) => Ok(value),
+        };
+        let restitution = coefficient(&raw.restitution, "scene.restitution")?;
+        let wall_restitution = coefficient(&raw.wall_restitution, "scene.wall_restitution")?;
+        let gravity = match self.from_file(&raw.gravity) {
+            None => None,
+            Some(Sourced { value, origin }) => {
+                let [gx, gy] =
+                    self.pair(&value, origin, "scene.gravity", "gravity = [0.0, -9.81]")?;
+                // Model no more than the scene needs: a zero field is no field.
+                (gx != 0.0 || gy != 0.0).then_some([gx, gy])
+            }
+        };
+        Ok(Physics {
+            restitution,
+            wall_restitution,
+            gravity,
+        })
+    }
+
+    fn pair(
+        &self,
+        value: &[f64],
+        origin: Origin,
+        field: &str,
+        example: &str,
+    ) -> Result<[f64; 2], SceneFileError> {
+        match value {
+            [a, b] if a.is_finite() && b.is_finite() => Ok([*a, *b]),
+            _ => Err(self.invalid(
+                origin,
+                field,
+                format!("is {value:?}, not two finite numbers"),
+                &format!("write it as {example}"),
+            )),
+        }
+    }
+
+    fn size(&self, raw: &RawScene) -> Result<Option<(f64, f64)>, SceneFileError> {
+        let Some(Sourced { value, origin }) = self.from_file(&raw.size) else {
+            return Ok(None);
+        };
+        let [width, height] = self.pair(&value, origin, "scene.size", "size = [100.0, 100.0]")?;
+        if width <= 0.0 || height <= 0.0 {
+            return Err(self.invalid(
+                origin,
+                "scene.size",
+                format!("is [{width}, {height}], not positive"),
+                "give a positive width and height, e.g. size = [100.0, 100.0]",
+            ));
+        }
+        Ok(Some((width, height)))
+    }
+
+    fn positive(
+        &self,
+        value: f64,
+        origin: Origin,
+        field: &str,
+        fix: &str,
+    ) -> Result<f64, SceneFileError> {
+        if value > 0.0 && value.is_finite() {
+            Ok(value)
+        } else {
+            Err(self.invalid(origin, field, format!("is {value}, not positive"), fix))
+        }
+    }
+
+    fn radius(&self, raw: &RawScene) -> Result<(RadiusDistribution, Origin), SceneFileError> {
+        let Some(spanned) = &raw.radius else {
+            return Ok((RadiusDistribution::Fixed(1.0), Origin::Default));
+        };
+        let origin = self.origin(spanned.span());
+        let fix = "give a radius > 0, e.g. radius = 1.0 or radius = { min = 0.5, max = 1.5 }";
+        let distribution = match *spanned.get_ref() {
+            RawRadius::Fixed(r) => {
+                RadiusDistribution::Fixed(self.positive(r, origin, "scene.radius", fix)?)
+            }
+            RawRadius::Range { min, max } => {
+                let min = self.positive(min, origin, "scene.radius.min", fix)?;
+                let max = self.positive(max, origin, "scene.radius.max", fix)?;
+                if min > max {
+                    return Err(self.invalid(
+                        origin,
+                        "scene.radius",
+                        format!("has min {min} above max {max}"),
+                        "swap them",
+                    ));
+                }
+                RadiusDistribution::Uniform { min, max }
+            }
+        };
+        Ok((distribution, origin))
+    }
+
+    fn mass(&self, raw: &RawScene) -> Result<MassRule, SceneFileError> {
+        let Some(spanned) = &raw.mass else {
+            return Ok(MassRule::Fixed(1.0));
+        };
+        let origin = self.origin(spanned.span());
+        match spanned.get_ref() {
+            RawMass::Fixed(m) => Ok(MassRule::Fixed(self.positive(
+                *m,
+                origin,
+                "scene.mass",
+                "give a mass > 0, or mass = \"area\"",
+            )?)),
+            RawMass::Rule(rule) if rule == "area" => Ok(MassRule::Area),
+            RawMass::Rule(rule) => Err(self.invalid(
+                origin,
+                "scene.mass",
+                format!("is \"{rule}\""),
+                "give a positive number, or \"area\" for mass = π r²",
+            )),
+        }
+    }
+
+    fn gas(&self, raw: &RawScene, overrides: &Overrides) -> Result<GasSpec, SceneFileError> {
+        let n_particles = match self.pick("--n", overrides.n, &raw.n, |n| *n) {
+            None => {
+                return Err(self.invalid(
+                    Origin::Default,
+                    "scene.n",
+                    "is missing".to_owned(),
+                    "give the number of disks, e.g. n = 1000, or list them as [[scene.particle]]",
+                ));
+            }
+            Some(Sourced { value, origin }) => usize::try_from(value)
+                .ok()
+                .filter(|&n| (1..=u32::MAX as usize).contains(&n))
+                .ok_or_else(|| {
+                    self.invalid(
+                        origin,
+                        "scene.n",
+                        format!("is {value}, not a positive number of disks"),
+                        "give at least 1 disk, e.g. n = 1000",
+                    )
+                })?,
+        };
+        let placement = self
+            .from_file(&raw.placement)
+            .map_or(Placement::Random, |sourced| sourced.value);
+        let packing = self.pick("--packing", overrides.packing, &raw.packing, |p| *p);
+        let extent = match (packing, self.size(raw)?) {
+            (Some(Sourced { origin, .. }), Some(_)) => {
+                return Err(self.invalid(
+                    origin,
+                    "scene.packing",
+                    "is given together with scene.size".to_owned(),
+                    "give either packing (the box is then square) or size, not both",
+                ));
+            }
+            (Some(Sourced { value, origin }), None) => {
+                let limit = match placement {
+                    Placement::Random => RSA_JAMMING_PACKING,
+                    Placement::Lattice => std::f64::consts::FRAC_PI_4,
+                };
+                if !(value > 0.0 && value <= limit) {
+                    return Err(self.invalid(
+                        origin,
+                        "scene.packing",
+                        format!("is {value}, outside (0, {limit}] for {placement:?} placement"),
+                        "random sequential addition jams near 0.547 and a square lattice holds at most π/4; \
+                         lower the packing, or use placement = \"lattice\" for dense scenes",
+                    ));
+                }
+                Extent::Packing(value)
+            }
+            (None, Some((width, height))) => Extent::Size { width, height },
+            (None, None) => {
+                return Err(self.invalid(
+                    Origin::Default,
+                    "scene.packing",
+                    "is missing, and so is scene.size".to_owned(),
+                    "give the area fraction, e.g. packing = 0.05, or the box, e.g. size = [100.0, 100.0]",
+                ));
+            }
+        };
+        let speed_rms = match self.from_file(&raw.speed_rms) {
+            None => 1.0,
+            Some(Sourced { value, origin }) if !(value >= 0.0 && value.is_finite()) => {
+                return Err(self.invalid(
+                    origin,
+                    "scene.speed_rms",
+                    format!("is {value}, not a speed ≥ 0"),
+                    "give the rms speed of the initial velocities, e.g. speed_rms = 1.0",
+                ));
+            }
+            Some(Sourced { value, .. }) => value,
+        };
+        Ok(GasSpec {
+            n_particles,
+            extent,
+            radius: self.radius(raw)?.0,
+            mass: self.mass(raw)?,
+            speed_rms,
+            placement,
+            boundary: self
+                .from_file(&raw.boundary)
+                .map_or(Boundary::Walls, |s| s.value),
+            physics: self.physics(raw)?,
+            seed: self
+                .pick("--seed", overrides.seed, &raw.seed, |s| *s)
+                .map_or(0, |s| s.value),
+        })
+    }
+
+    fn explicit_scene(
+        &self,
+        raw: &RawScene,
+        overrides: &Overrides,
+    ) -> Result<SceneSource, SceneFileError> {
+        let random_only: [(&str, Option<Origin>); 7] = [
+            ("scene.n", raw.n.as_ref().map(|s| self.origin(s.span()))),
+            (
+                "scene.packing",
+                raw.packing.as_ref().map(|s| self.origin(s.span())),
+            ),
+            (
+                "scene.speed_rms",
+                raw.speed_rms.as_ref().map(|s| self.origin(s.span())),
+            ),
+            (
+                "scene.seed",
+                raw.seed.as_ref().map(|s| self.origin(s.span())),
+            ),
+            (
+                "scene.placement",
+                raw.placement.as_ref().map(|s| self.origin(s.span())),
+            ),
+            ("--n", overrides.n.map(|_| Origin::Flag("--n"))),
+            (
+                "--packing",
+                overrides.packing.map(|_| Origin::Flag("--packing")),
+            ),
+        ];
+        let seed_flag = overrides.seed.map(|_| Origin::Flag("--seed"));
+        for (field, origin) in random_only.into_iter().chain([("--seed", seed_flag)]) {
+            if let Some(origin) = origin {
+                return Err(self.invalid(
+                    origin,
+                    field,
+                    "applies to random scenes, but this scene lists its disks as [[scene.particle]]".to_owned(),
+                    "remove it, or remove the [[scene.particle]] entries",
+                ));
+            }
+        }
+        let Some((width, height)) = self.size(raw)? else {
+            return Err(self.invalid(
+                Origin::Default,
+                "scene.size",
+                "is missing".to_owned(),
+                "a scene with explicit disks needs its box, e.g. size = [100.0, 100.0]",
+            ));
+        };
+        let domain = Domain {
+            width,
+            height,
+            boundary: self
+                .from_file(&raw.boundary)
+                .map_or(Boundary::Walls, |s| s.value),
+        };
+        let (default_radius, radius_origin) = match self.radius(raw)? {
+            (RadiusDistribution::Fixed(r), origin) => (r, origin),
+            (RadiusDistribution::Uniform { .. }, origin) => {
+                return Err(self.invalid(
+                    origin,
+                    "scene.radius",
+                    "is a range, which only random scenes draw from".to_owned(),
+                    "give one radius as the default, or a radius per [[scene.particle]]",
+                ));
+            }
+        };
+        let default_mass = match self.mass(raw)? {
+            MassRule::Fixed(m) => Some(m),
+            MassRule::Area => None,
+        };
+        let entries = raw.particle.as_deref().unwrap_or_default();
+        let mut disks = Vec::with_capacity(entries.len());
+        let mut origins = Vec::with_capacity(entries.len());
+        for (index, entry) in entries.iter().enumerate() {
+            let origin = self.origin(entry.span());
+            let field = format!("scene.particle[{index}]");
+            let p = entry.get_ref();
+            let radius = match p.radius {
+                Some(r) => {
+                    self.positive(r, origin, &format!("{field}.radius"), "give a radius > 0")?
+                }
+                None => self.positive(
+                    default_radius,
+                    radius_origin,
+                    "scene.radius",
+                    "give a radius > 0",
+                )?,
+            };
+            let mass = match p.mass.or(default_mass) {
+                Some(m) => self.positive(m, origin, &format!("{field}.mass"), "give a mass > 0")?,
+                None => std::f64::consts::PI * radius * radius,
+            };
+            if ![p.x, p.y, p.vx, p.vy].iter().all(|v| v.is_finite()) {
+                return Err(self.invalid(
+                    origin,
+                    &field,
+                    "has a position or velocity that is not a finite number".to_owned(),
+                    "give finite x, y, vx, vy",
+                ));
+            }
+            let inside = match domain.boundary {
+                Boundary::Walls => {
+                    p.x - radius >= 0.0
+                        && p.x + radius <= width
+                        && p.y - radius >= 0.0
+                        && p.y + radius <= height
+                }
+                Boundary::Periodic => (0.0..width).contains(&p.x) && (0.0..height).contains(&p.y),
+            };
+            if !inside {
+                return Err(self.invalid(
+                    origin,
+                    &field,
+                    format!(
+                        "at ({}, {}) with radius {radius} does not lie inside the {width}×{height} box",
+                        p.x, p.y
+                    ),
+                    "move it inside [0, w] × [0, h] (the whole disk, with walls) or enlarge scene.size",
+                ));
+            }
+            disks.push(Disk {
+                x: p.x,
+                y: p.y,
+                vx: p.vx,
+                vy: p.vy,
+                radius,
+                mass,
+            });
+            origins.push(origin);
+        }
+        if disks.is_empty() {
+            return Err(self.invalid(
+                Origin::Default,
+                "scene.particle",
+                "is empty".to_owned(),
+                "list at least one [[scene.particle]]",
+            ));
+        }
+        let particles = Particles::from_disks(&disks);
+        if check_periodic_box(&domain, particles.max_radius()).is_err() {
+            return Err(self.invalid(
+                self.from_file(&raw.size)
+                    .map_or(Origin::Default, |s| s.origin),
+                "scene.size",
+                format!(
+                    "is {width}×{height}, narrower than 3 contact diameters ({}) of a periodic box",
+                    6.0 * particles.max_radius()
+                ),
+                "enlarge the box, or use boundary = \"walls\"",
+            ));
+        }
+        let mut grid = CellGrid::new(&domain, particles.max_radius(), particles.len());
+        grid.build(&particles);
+        let mut contacts = Vec::new();
+        grid.find_contacts(&particles, &domain, &mut contacts);
+        if let Some(first) = contacts.iter().min_by_key(|contact| contact.key) {
+            let (a, b) = (first.a as usize, first.b as usize);
+            return Err(self.invalid(
+                origins[b],
+                &format!("scene.particle[{b}]"),
+                format!("overlaps scene.particle[{a}]"),
+                "move the disks apart: centres must be at least r_a + r_b apart",
+            ));
+        }
+        Ok(SceneSource::Explicit(Scene {
+            domain,
+            physics: self.physics(raw)?,
+            particles,
+        }))
+    }
+}
+
+/// 1-based line number of a byte offset.
+fn line_of(text: &str, offset: usize) -> usize {
+    text[..offset.min(text.len())]
+        .bytes()
+        .filter(|&b| b == b'\n')
+        .count()
+        + 1
+}

@@ -1,0 +1,14 @@
+//! The pure simulation core: state, physics, broad phase and stepping.
+//!
+//! No I/O, no printing, no threads: backends wrap it, and a step cannot fail.
+
+pub mod collision;
+pub mod grid;
+pub mod observe;
+pub mod particles;
+pub mod scene;
+pub mod step;
+
+pub use particles::{Disk, Particles};
+pub use scene::{Boundary, Domain, Physics, Scene};
+pub use step::{Broadphase, StepCounters, StepParams, Stepper};

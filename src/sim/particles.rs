@@ -1,0 +1,121 @@
+//! Structure-of-arrays disk state: the one place particle data lives.
+//!
+//! Invariants (established by scene construction, kept by every stage):
+//! all arrays have the same length, `id` is a permutation of `0..len`,
+//! every radius and mass is finite and positive. Storage order is free:
+//! stages may reorder the arrays together, and anything that must not
+//! depend on storage order (pair order, hashes, sums) goes by `id`.
+
+/// Positions, velocities and properties of every disk, one `f64` array per quantity.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Particles {
+    /// Stable identity of each disk, `0..len`, independent of storage order.
+    pub id: Vec<u32>,
+    pub x: Vec<f64>,
+    pub y: Vec<f64>,
+    pub vx: Vec<f64>,
+    pub vy: Vec<f64>,
+    pub radius: Vec<f64>,
+    pub mass: Vec<f64>,
+}
+
+/// One disk, used to build and inspect [`Particles`] (not on hot paths).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Disk {
+    pub x: f64,
+    pub y: f64,
+    pub vx: f64,
+    pub vy: f64,
+    pub radius: f64,
+    pub mass: f64,
+}
+
+impl Particles {
+    /// Builds the state from disks given in id order.
+    pub fn from_disks(disks: &[Disk]) -> Self {
+        let mut particles = Particles::with_capacity(disks.len());
+        for disk in disks {
+            particles.push(*disk);
+        }
+        particles
+    }
+
+    pub fn with_capacity(n_particles: usize) -> Self {
+        Particles {
+            id: Vec::with_capacity(n_particles),
+            x: Vec::with_capacity(n_particles),
+            y: Vec::with_capacity(n_particles),
+            vx: Vec::with_capacity(n_particles),
+            vy: Vec::with_capacity(n_particles),
+            radius: Vec::with_capacity(n_particles),
+            mass: Vec::with_capacity(n_particles),
+        }
+    }
+
+    /// Appends a disk with the next id.
+    pub fn push(&mut self, disk: Disk) {
+        self.id.push(self.len() as u32);
+        self.x.push(disk.x);
+        self.y.push(disk.y);
+        self.vx.push(disk.vx);
+        self.vy.push(disk.vy);
+        self.radius.push(disk.radius);
+        self.mass.push(disk.mass);
+    }
+
+    pub fn len(&self) -> usize {
+        self.id.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.id.is_empty()
+    }
+
+    /// The disk stored at `idx` (a storage index, not an id).
+    pub fn disk(&self, idx: usize) -> Disk {
+        Disk {
+            x: self.x[idx],
+            y: self.y[idx],
+            vx: self.vx[idx],
+            vy: self.vy[idx],
+            radius: self.radius[idx],
+            mass: self.mass[idx],
+        }
+    }
+
+    /// Storage indices in id order: `order[id]` is where disk `id` is stored.
+    pub fn storage_index_by_id(&self) -> Vec<usize> {
+        let mut order = vec![0; self.len()];
+        for (idx, &id) in self.id.iter().enumerate() {
+            order[id as usize] = idx;
+        }
+        order
+    }
+
+    /// The disks in id order, whatever the storage order.
+    pub fn disks_by_id(&self) -> Vec<Disk> {
+        self.storage_index_by_id()
+            .into_iter()
+            .map(|idx| self.disk(idx))
+            .collect()
+    }
+
+    /// Largest radius, 0 for an empty set.
+    pub fn max_radius(&self) -> f64 {
+        self.radius.iter().copied().fold(0.0, f64::max)
+    }
+
+    /// Smallest radius, infinite for an empty set.
+    pub fn min_radius(&self) -> f64 {
+        self.radius.iter().copied().fold(f64::INFINITY, f64::min)
+    }
+
+    /// Largest speed, 0 for an empty set.
+    pub fn max_speed(&self) -> f64 {
+        self.vx
+            .iter()
+            .zip(&self.vy)
+            .map(|(vx, vy)| vx.hypot(*vy))
+            .fold(0.0, f64::max)
+    }
+}

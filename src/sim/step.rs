@@ -1,0 +1,222 @@
+//! One time step of the seed's method, composed from integration, boundary, broad phase
+//! and contact resolution. Cannot fail, does no I/O.
+//!
+//! Determinism rule: contacts are resolved one after another in the canonical order of
+//! their id pairs (`Contact::key`). Two contacts that share no disk commute exactly, so
+//! any schedule that keeps this order within each chain of contacts sharing disks gives
+//! the same bits; that is what lets parallel backends reproduce this serial reference.
+
+use serde::{Deserialize, Serialize};
+
+use super::collision::resolve_contact;
+use super::grid::{CellGrid, Contact, find_contacts_all_pairs};
+use super::particles::Particles;
+use super::scene::{Boundary, Domain, Physics, wrap_periodic};
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Broadphase {
+    /// Cell list, O(N) per step.
+    #[default]
+    Grid,
+    /// Every pair, O(N²) per step: the seed report's algorithm, kept for comparison.
+    AllPairs,
+}
+
+impl Broadphase {
+    pub fn name(self) -> &'static str {
+        match self {
+            Broadphase::Grid => "grid",
+            Broadphase::AllPairs => "allpairs",
+        }
+    }
+}
+
+/// Settings of the time-stepped method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepParams {
+    /// Time step, positive and finite.
+    pub dt: f64,
+    pub broadphase: Broadphase,
+}
+
+/// Running totals of what the steps did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepCounters {
+    /// Pair impulses applied (overlapping and approaching pairs).
+    pub pair_collisions: u64,
+    /// Wall reflections applied (a disk touching a wall and moving outward).
+    pub wall_collisions: u64,
+    /// Largest overlap seen, as a fraction of the pair's contact distance.
+    pub max_overlap: f64,
+}
+
+/// Advances a set of disks in time. Holds scratch memory only; the caller owns the disks.
+#[derive(Clone, Debug)]
+pub struct Stepper {
+    domain: Domain,
+    physics: Physics,
+    params: StepParams,
+    grid: CellGrid,
+    contacts: Vec<Contact>,
+    counters: StepCounters,
+}
+
+impl Stepper {
+    pub fn new(
+        domain: Domain,
+        physics: Physics,
+        params: StepParams,
+        particles: &Particles,
+    ) -> Self {
+        Stepper {
+            domain,
+            physics,
+            params,
+            grid: CellGrid::new(&domain, particles.max_radius(), particles.len()),
+            contacts: Vec::new(),
+            counters: StepCounters::default(),
+        }
+    }
+
+    pub fn counters(&self) -> StepCounters {
+        self.counters
+    }
+
+    /// One full step: move, apply the boundary, find overlaps, resolve them.
+    pub fn step(&mut self, particles: &mut Particles) {
+        self.integrate(particles);
+        self.apply_boundary(particles);
+        self.find_contacts(particles);
+        self.resolve_contacts(particles);
+    }
+
+    /// Moves every disk by one dt: the seed's equations 8–9 (x += v·dt) without a field,
+    /// velocity Verlet (equations 6–7) with a constant one.
+    pub fn integrate(&mut self, particles: &mut Particles) {
+        let dt = self.params.dt;
+        match self.physics.gravity {
+            None => {
+                drift(&mut particles.x, &particles.vx, dt);
+                drift(&mut particles.y, &particles.vy, dt);
+            }
+            Some([gx, gy]) => {
+                accelerate(&mut particles.x, &mut particles.vx, gx, dt);
+                accelerate(&mut particles.y, &mut particles.vy, gy, dt);
+            }
+        }
+    }
+
+    /// Reflects disks that touch a wall while moving outward, or wraps periodic ones.
+    pub fn apply_boundary(&mut self, particles: &mut Particles) {
+        let Domain {
+            width,
+            height,
+            boundary,
+        } = self.domain;
+        match boundary {
+            Boundary::Periodic => {
+                for x in &mut particles.x {
+                    *x = wrap_periodic(*x, width);
+                }
+                for y in &mut particles.y {
+                    *y = wrap_periodic(*y, height);
+                }
+            }
+            Boundary::Walls => {
+                let e = self.physics.wall_restitution;
+                let hits =
+                    reflect_at_walls(&particles.x, &mut particles.vx, &particles.radius, width, e)
+                        + reflect_at_walls(
+                            &particles.y,
+                            &mut particles.vy,
+                            &particles.radius,
+                            height,
+                            e,
+                        );
+                self.counters.wall_collisions += hits;
+            }
+        }
+    }
+
+    /// Finds every overlapping pair and puts them in canonical order.
+    pub fn find_contacts(&mut self, particles: &Particles) {
+        self.contacts.clear();
+        match self.params.broadphase {
+            Broadphase::Grid => {
+                self.grid.build(particles);
+                self.grid
+                    .find_contacts(particles, &self.domain, &mut self.contacts);
+            }
+            Broadphase::AllPairs => {
+                find_contacts_all_pairs(particles, &self.domain, &mut self.contacts);
+            }
+        }
+        // Canonical order: the result of resolution must not depend on how pairs were found.
+        self.contacts.sort_unstable_by_key(|contact| contact.key);
+    }
+
+    /// Applies the impulse law to each found pair, in canonical order.
+    pub fn resolve_contacts(&mut self, particles: &mut Particles) {
+        let e = self.physics.restitution;
+        for contact in &self.contacts {
+            let outcome = resolve_contact(
+                particles,
+                &self.domain,
+                e,
+                contact.a as usize,
+                contact.b as usize,
+            );
+            self.counters.pair_collisions += u64::from(outcome.collided);
+            self.counters.max_overlap = self.counters.max_overlap.max(outcome.overlap_fraction);
+        }
+    }
+}
+
+fn drift(positions: &mut [f64], velocities: &[f64], dt: f64) {
+    for (p, v) in positions.iter_mut().zip(velocities) {
+        *p += v * dt;
+    }
+}
+
+fn accelerate(positions: &mut [f64], velocities: &mut [f64], acceleration: f64, dt: f64) {
+    let half_a_dt2 = 0.5 * acceleration * dt * dt;
+    let a_dt = acceleration * dt;
+    for (p, v) in positions.iter_mut().zip(velocities) {
+        *p += *v * dt + half_a_dt2;
+        *v += a_dt;
+    }
+}
+
+/// Reflects, along one axis, the disks that touch the wall at 0 or at `length` and move
+/// towards it. Returns how many it reflected.
+fn reflect_at_walls(
+    positions: &[f64],
+    velocities: &mut [f64],
+    radii: &[f64],
+    length: f64,
+    wall_restitution: f64,
+) -> u64 {
+    let mut hits = 0;
+    for ((&p, v), &r) in positions.iter().zip(velocities).zip(radii) {
+        let outward = (p - r < 0.0 && *v < 0.0) || (p + r > length && *v > 0.0);
+        if outward {
+            *v = -wall_restitution * *v;
+            hits += 1;
+        }
+    }
+    hits
+}
+
+/// The largest dt for which the fastest disk moves at most `fraction` of the smallest
+/// radius per step. With a field, the fastest speed includes what a fall across the
+/// whole box can add. A scene at rest gets the dt of unit speed.
+pub fn auto_dt(particles: &Particles, domain: &Domain, physics: &Physics, fraction: f64) -> f64 {
+    let mut max_speed = particles.max_speed();
+    if let Some([gx, gy]) = physics.gravity {
+        let g = gx.hypot(gy);
+        max_speed += (2.0 * g * domain.width.max(domain.height)).sqrt();
+    }
+    let max_speed = if max_speed > 0.0 { max_speed } else { 1.0 };
+    fraction * particles.min_radius() / max_speed
+}

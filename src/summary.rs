@@ -1,0 +1,96 @@
+//! The result of one run: the JSON summary (stable field names that later tools read)
+//! and its human-readable form.
+
+use std::fmt;
+
+use serde::{Deserialize, Serialize};
+
+/// One run's measurements. Field names are a public interface: scripts and the study
+/// driver read them. Times are wall-clock seconds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunSummary {
+    /// Number of disks.
+    pub n: usize,
+    pub steps: u64,
+    /// Time step (simulation time units).
+    pub dt: f64,
+    /// With `dt = "auto"`: the fraction f in v_max·dt = f·r_min that chose dt; null when dt was given.
+    pub dt_auto_fraction: Option<f64>,
+    pub backend: String,
+    /// Workers used: threads × ranks (1 for serial).
+    pub workers: usize,
+    pub boundary: String,
+    pub broadphase: String,
+    /// Area fraction covered by disks.
+    pub packing: f64,
+    /// Seed of a random scene; absent for explicit disks.
+    pub seed: Option<u64>,
+    /// Seconds in the stepping loop only.
+    pub wall_s: f64,
+    /// Seconds to build the initial state and scratch memory.
+    pub setup_s: f64,
+    /// Steps per second of `wall_s`.
+    pub fps: f64,
+    /// n × steps / wall_s.
+    pub particle_steps_per_s: f64,
+    pub kinetic_energy_initial: f64,
+    pub kinetic_energy_final: f64,
+    /// Total momentum [px, py] before the first step.
+    pub momentum_initial: [f64; 2],
+    pub momentum_final: [f64; 2],
+    pub pair_collisions: u64,
+    pub wall_collisions: u64,
+    /// Largest overlap seen, as a fraction of the pair's contact distance.
+    pub max_overlap: f64,
+    /// xxh3-64 of the bits of final x, y, vx, vy in id order: equal hashes, identical states.
+    pub state_hash: String,
+}
+
+impl fmt::Display for RunSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let dt_rule = self.dt_auto_fraction.map_or_else(String::new, |fraction| {
+            format!(" (auto: the fastest disk moves {fraction}·r_min per step)")
+        });
+        let seed = self
+            .seed
+            .map_or_else(|| "explicit disks".to_owned(), |s| format!("seed {s}"));
+        writeln!(
+            f,
+            "{} disks, {} boundary, packing {:.4}, {seed}",
+            self.n, self.boundary, self.packing
+        )?;
+        writeln!(
+            f,
+            "{} steps of dt = {:.6e}{dt_rule}, {} backend, {} worker(s), {} broad phase",
+            self.steps, self.dt, self.backend, self.workers, self.broadphase
+        )?;
+        writeln!(
+            f,
+            "time       {:.4} s stepping ({:.1} steps/s, {:.3e} particle-steps/s), {:.4} s setup",
+            self.wall_s, self.fps, self.particle_steps_per_s, self.setup_s
+        )?;
+        let relative_change = (self.kinetic_energy_final - self.kinetic_energy_initial)
+            / self.kinetic_energy_initial.abs().max(f64::MIN_POSITIVE);
+        writeln!(
+            f,
+            "energy     {:.9e} → {:.9e} (relative change {relative_change:+.3e})",
+            self.kinetic_energy_initial, self.kinetic_energy_final
+        )?;
+        writeln!(
+            f,
+            "momentum   [{:+.3e}, {:+.3e}] → [{:+.3e}, {:+.3e}]",
+            self.momentum_initial[0],
+            self.momentum_initial[1],
+            self.momentum_final[0],
+            self.momentum_final[1]
+        )?;
+        writeln!(
+            f,
+            "collisions {} pair, {} wall; max overlap {:.3}% of contact distance",
+            self.pair_collisions,
+            self.wall_collisions,
+            100.0 * self.max_overlap
+        )?;
+        write!(f, "state hash {}", self.state_hash)
+    }
+}
