@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::sim::grid::CellGrid;
+use crate::sim::grid::StripGrid;
 use crate::sim::scene::{
     Extent, GasSpec, MassRule, Placement, RSA_JAMMING_PACKING, RadiusDistribution,
     check_periodic_box,
@@ -652,7 +652,7 @@ impl Validator<'_> {
                 "enlarge the box, or use boundary = \"walls\"",
             ));
         }
-        let mut grid = CellGrid::new(&domain, particles.max_radius(), particles.len());
+        let mut grid = StripGrid::new(&domain, particles.max_radius());
         grid.build(&particles);
         let mut contacts = Vec::new();
         grid.find_contacts(&particles, &domain, &mut contacts);

@@ -34,107 +34,122 @@ impl Contact {
     }
 }
 
-/// Average number of disks per cell the grid aims for. Cells are never narrower than
-/// one contact diameter; in dilute scenes wider cells cut the cost of visiting empty ones.
-const TARGET_DISKS_PER_CELL: f64 = 1.0;
-
-/// A uniform cell list rebuilt every step by a counting sort.
-///
-/// Scratch memory only: the caller owns the particles. Positions and radii are copied in
-/// cell order so the pair scan reads memory sequentially.
-#[derive(Clone, Debug)]
-pub struct CellGrid {
-    n_cols: usize,
-    n_rows: usize,
-    inv_cell_width: f64,
-    inv_cell_height: f64,
-    /// `cell_start[c]..cell_start[c + 1]` are the sorted slots of cell `c`.
-    cell_start: Vec<u32>,
-    /// Next free slot per cell during the scatter.
-    cursor: Vec<u32>,
-    /// Cell of each disk, by storage index.
-    cell_of: Vec<u32>,
-    /// Storage index of the disk in each sorted slot.
-    order: Vec<u32>,
-    sorted_x: Vec<f64>,
-    sorted_y: Vec<f64>,
-    sorted_radius: Vec<f64>,
+/// One disk in the sorted view: what the pair scan reads, 32 bytes, in (strip, x) order.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Entry {
+    x: f64,
+    y: f64,
+    radius: f64,
+    /// Storage index of the disk.
+    idx: u32,
+    strip: u32,
 }
 
-impl CellGrid {
-    /// A grid for `n_particles` disks no larger than `max_radius` in `domain`.
+impl Entry {
+    #[inline(always)]
+    fn before(&self, other: &Entry) -> bool {
+        self.strip < other.strip || (self.strip == other.strip && self.x < other.x)
+    }
+}
+
+/// The grid broad phase: the box cut into horizontal strips one contact diameter tall,
+/// disks sorted by x within each strip (a sweep-and-prune per strip).
+///
+/// Each disk is tested against the disks after it in its own strip while their x
+/// distance is below one diameter, and against the disks of the strip above within one
+/// diameter in x: about 3·ρ·d² candidates per disk. The sorted order persists between
+/// steps, so re-sorting is an insertion sort over the few disks that moved past a
+/// neighbour or into another strip: O(N) per step. Scratch memory only.
+#[derive(Clone, Debug)]
+pub struct StripGrid {
+    n_strips: usize,
+    inv_strip_height: f64,
+    width: f64,
+    /// Largest contact distance, widened by a relative 1e-9 so that the window never
+    /// rejects a pair the exact test (done with the shared arithmetic) would accept.
+    reach: f64,
+    /// `strip_start[s]..strip_start[s + 1]` are the slots of strip `s` in `entries`.
+    strip_start: Vec<u32>,
+    entries: Vec<Entry>,
+    /// False until the first build, which sorts from scratch.
+    sorted: bool,
+}
+
+impl StripGrid {
+    /// A grid for disks no larger than `max_radius` in `domain`.
     ///
     /// A periodic domain must be at least three contact diameters across
-    /// (`scene::check_periodic_box`), so the half stencil never visits a cell twice.
-    pub fn new(domain: &Domain, max_radius: f64, n_particles: usize) -> CellGrid {
+    /// (`scene::check_periodic_box`), so no pair is found through two images.
+    pub fn new(domain: &Domain, max_radius: f64) -> StripGrid {
         let contact = 2.0 * max_radius;
-        let target = (domain.area() * TARGET_DISKS_PER_CELL / n_particles.max(1) as f64).sqrt();
-        let cell = contact.max(target);
-        let min_cells = match domain.boundary {
-            Boundary::Walls => 1,
-            Boundary::Periodic => 3,
-        };
-        let cells_along = |length: f64| {
-            let widest = ((length / contact).floor() as usize).max(1);
-            ((length / cell).floor() as usize).clamp(min_cells.min(widest), widest)
-        };
-        let (n_cols, n_rows) = (cells_along(domain.width), cells_along(domain.height));
-        let n_cells = n_cols * n_rows;
-        CellGrid {
-            n_cols,
-            n_rows,
-            inv_cell_width: n_cols as f64 / domain.width,
-            inv_cell_height: n_rows as f64 / domain.height,
-            cell_start: vec![0; n_cells + 1],
-            cursor: vec![0; n_cells],
-            cell_of: Vec::with_capacity(n_particles),
-            order: vec![0; n_particles],
-            sorted_x: vec![0.0; n_particles],
-            sorted_y: vec![0.0; n_particles],
-            sorted_radius: vec![0.0; n_particles],
+        let n_strips = ((domain.height / contact).floor() as usize).max(1);
+        StripGrid {
+            n_strips,
+            inv_strip_height: n_strips as f64 / domain.height,
+            width: domain.width,
+            reach: contact * (1.0 + 1e-9),
+            strip_start: vec![0; n_strips + 1],
+            entries: Vec::new(),
+            sorted: false,
         }
     }
 
-    pub fn n_cells(&self) -> usize {
-        self.n_cols * self.n_rows
+    pub fn n_strips(&self) -> usize {
+        self.n_strips
     }
 
-    /// Sorts the disks into cells. Disks outside a walled box go to the nearest edge cell,
-    /// which still holds every disk they can touch.
+    /// Storage indices in sorted order (strip, then x), as of the last build.
+    pub fn sorted_indices(&self) -> Vec<u32> {
+        self.entries.iter().map(|entry| entry.idx).collect()
+    }
+
+    /// Tells the grid that the caller stored the disks in [`StripGrid::sorted_indices`]
+    /// order, so slot and storage index now coincide.
+    pub fn storage_now_sorted(&mut self) {
+        for (slot, entry) in self.entries.iter_mut().enumerate() {
+            entry.idx = slot as u32;
+        }
+    }
+
+    /// Re-sorts the disks by strip and x. Disks outside a walled box go to the nearest
+    /// edge strip, which still holds every disk they can touch.
     pub fn build(&mut self, particles: &Particles) {
-        let n_particles = particles.len();
-        self.order.resize(n_particles, 0);
-        self.sorted_x.resize(n_particles, 0.0);
-        self.sorted_y.resize(n_particles, 0.0);
-        self.sorted_radius.resize(n_particles, 0.0);
-        self.cell_of.clear();
-        self.cell_start.fill(0);
-        let (max_col, max_row) = (self.n_cols - 1, self.n_rows - 1);
-        for (&x, &y) in particles.x.iter().zip(&particles.y) {
-            // `as usize` saturates: negative coordinates (and NaN) land in cell 0.
-            let col = ((x * self.inv_cell_width) as usize).min(max_col);
-            let row = ((y * self.inv_cell_height) as usize).min(max_row);
-            let cell_idx = row * self.n_cols + col;
-            self.cell_of.push(cell_idx as u32);
-            self.cell_start[cell_idx + 1] += 1;
+        let max_strip = self.n_strips - 1;
+        let strip_of = |y: f64| ((y * self.inv_strip_height) as usize).min(max_strip) as u32;
+        if !self.sorted || self.entries.len() != particles.len() {
+            self.entries = (0..particles.len())
+                .map(|idx| Entry {
+                    x: particles.x[idx],
+                    y: particles.y[idx],
+                    radius: particles.radius[idx],
+                    idx: idx as u32,
+                    strip: 0,
+                })
+                .collect();
         }
-        let n_cells = self.n_cells();
-        for cell_idx in 0..n_cells {
-            self.cell_start[cell_idx + 1] += self.cell_start[cell_idx];
+        self.strip_start.fill(0);
+        for entry in &mut self.entries {
+            let idx = entry.idx as usize;
+            entry.x = particles.x[idx];
+            entry.y = particles.y[idx];
+            // `as usize` saturates: negative coordinates (and NaN) land in strip 0.
+            entry.strip = strip_of(entry.y);
+            self.strip_start[entry.strip as usize + 1] += 1;
         }
-        self.cursor.copy_from_slice(&self.cell_start[..n_cells]);
-        for (idx, &cell_idx) in self.cell_of.iter().enumerate() {
-            let slot = self.cursor[cell_idx as usize] as usize;
-            self.cursor[cell_idx as usize] += 1;
-            self.order[slot] = idx as u32;
-            self.sorted_x[slot] = particles.x[idx];
-            self.sorted_y[slot] = particles.y[idx];
-            self.sorted_radius[slot] = particles.radius[idx];
+        for strip in 0..self.n_strips {
+            self.strip_start[strip + 1] += self.strip_start[strip];
+        }
+        if self.sorted {
+            insertion_sort(&mut self.entries);
+        } else {
+            self.entries
+                .sort_unstable_by(|a, b| a.strip.cmp(&b.strip).then(a.x.total_cmp(&b.x)));
+            self.sorted = true;
         }
     }
 
     /// Appends every overlapping pair to `contacts` (in no particular order).
-    /// Call [`CellGrid::build`] first with the same particles.
+    /// Call [`StripGrid::build`] first with the same particles.
     pub fn find_contacts(
         &self,
         particles: &Particles,
@@ -147,95 +162,101 @@ impl CellGrid {
         }
     }
 
-    /// Visits each cell and the four neighbours after it (east, north-west, north,
-    /// north-east), so every adjacent pair of cells is scanned exactly once.
     fn scan<const PERIODIC: bool>(
         &self,
         particles: &Particles,
         domain: &Domain,
         contacts: &mut Vec<Contact>,
     ) {
-        let (n_cols, n_rows) = (self.n_cols, self.n_rows);
-        for row in 0..n_rows {
-            let north = if row + 1 < n_rows {
-                Some(row + 1)
+        let entries = &self.entries[..];
+        let (reach, width) = (self.reach, self.width);
+        let test = |a: &Entry, b: &Entry, contacts: &mut Vec<Contact>| {
+            let (dx, dy) = domain.separation_in::<PERIODIC>(a.x, a.y, b.x, b.y);
+            let contact = a.radius + b.radius;
+            if dx * dx + dy * dy < contact * contact {
+                contacts.push(Contact::new(particles, a.idx as usize, b.idx as usize));
+            }
+        };
+        for strip in 0..self.n_strips {
+            let own = self.strip_start[strip] as usize..self.strip_start[strip + 1] as usize;
+            let north_strip = if strip + 1 < self.n_strips {
+                Some(strip + 1)
             } else if PERIODIC {
                 Some(0)
             } else {
                 None
             };
-            for col in 0..n_cols {
-                let cell_idx = row * n_cols + col;
-                let (start, end) = (
-                    self.cell_start[cell_idx] as usize,
-                    self.cell_start[cell_idx + 1] as usize,
-                );
-                if start == end {
-                    continue;
+            let north = north_strip.map_or(0..0, |s| {
+                self.strip_start[s] as usize..self.strip_start[s + 1] as usize
+            });
+            let own_entries = &entries[own.clone()];
+            let north_entries = &entries[north];
+            // First north disk not left of the current window; the window only moves right.
+            let mut north_first = 0;
+            for (pos, a) in own_entries.iter().enumerate() {
+                // Own strip: the disks to the right within reach.
+                for b in own_entries[pos + 1..]
+                    .iter()
+                    .take_while(|b| b.x - a.x < reach)
+                {
+                    test(a, b, contacts);
                 }
-                let east = if col + 1 < n_cols {
-                    Some(col + 1)
-                } else if PERIODIC {
-                    Some(0)
-                } else {
-                    None
-                };
-                let west = if col > 0 {
-                    Some(col - 1)
-                } else if PERIODIC {
-                    Some(n_cols - 1)
-                } else {
-                    None
-                };
-                for slot_a in start..end {
-                    for slot_b in slot_a + 1..end {
-                        self.test_pair::<PERIODIC>(particles, domain, slot_a, slot_b, contacts);
+                // North strip: the disks within reach on either side.
+                while north_first < north_entries.len()
+                    && north_entries[north_first].x <= a.x - reach
+                {
+                    north_first += 1;
+                }
+                for b in north_entries[north_first..]
+                    .iter()
+                    .take_while(|b| b.x < a.x + reach)
+                {
+                    test(a, b, contacts);
+                }
+                if PERIODIC {
+                    // The same windows seen through the periodic image in x.
+                    if a.x + reach > width {
+                        for b in own_entries[..pos]
+                            .iter()
+                            .take_while(|b| b.x + width - a.x < reach)
+                        {
+                            test(a, b, contacts);
+                        }
+                        for b in north_entries
+                            .iter()
+                            .take_while(|b| b.x + width < a.x + reach)
+                        {
+                            test(a, b, contacts);
+                        }
                     }
-                }
-                let neighbours = [
-                    east.map(|c| row * n_cols + c),
-                    north.and_then(|r| west.map(|c| r * n_cols + c)),
-                    north.map(|r| r * n_cols + col),
-                    north.and_then(|r| east.map(|c| r * n_cols + c)),
-                ];
-                for neighbour in neighbours.into_iter().flatten() {
-                    let (other_start, other_end) = (
-                        self.cell_start[neighbour] as usize,
-                        self.cell_start[neighbour + 1] as usize,
-                    );
-                    for slot_a in start..end {
-                        for slot_b in other_start..other_end {
-                            self.test_pair::<PERIODIC>(particles, domain, slot_a, slot_b, contacts);
+                    if a.x - reach < 0.0 {
+                        for b in north_entries
+                            .iter()
+                            .rev()
+                            .take_while(|b| b.x - width > a.x - reach)
+                        {
+                            test(a, b, contacts);
                         }
                     }
                 }
             }
         }
     }
+}
 
-    #[inline(always)]
-    fn test_pair<const PERIODIC: bool>(
-        &self,
-        particles: &Particles,
-        domain: &Domain,
-        slot_a: usize,
-        slot_b: usize,
-        contacts: &mut Vec<Contact>,
-    ) {
-        let (dx, dy) = domain.separation_in::<PERIODIC>(
-            self.sorted_x[slot_a],
-            self.sorted_y[slot_a],
-            self.sorted_x[slot_b],
-            self.sorted_y[slot_b],
-        );
-        let contact = self.sorted_radius[slot_a] + self.sorted_radius[slot_b];
-        if dx * dx + dy * dy < contact * contact {
-            contacts.push(Contact::new(
-                particles,
-                self.order[slot_a] as usize,
-                self.order[slot_b] as usize,
-            ));
+/// Sorts nearly sorted entries in O(n + inversions).
+fn insertion_sort(entries: &mut [Entry]) {
+    for i in 1..entries.len() {
+        if !entries[i].before(&entries[i - 1]) {
+            continue;
         }
+        let moving = entries[i];
+        let mut j = i;
+        while j > 0 && moving.before(&entries[j - 1]) {
+            entries[j] = entries[j - 1];
+            j -= 1;
+        }
+        entries[j] = moving;
     }
 }
 

@@ -100,6 +100,21 @@ impl Particles {
             .collect()
     }
 
+    /// Stores the disks in a new order: `new_order` lists old storage indices, each once.
+    pub fn reorder(&mut self, new_order: &[u32]) {
+        fn gather<T: Copy>(values: &mut Vec<T>, order: &[u32]) {
+            *values = order.iter().map(|&idx| values[idx as usize]).collect();
+        }
+        debug_assert_eq!(new_order.len(), self.len());
+        gather(&mut self.id, new_order);
+        gather(&mut self.x, new_order);
+        gather(&mut self.y, new_order);
+        gather(&mut self.vx, new_order);
+        gather(&mut self.vy, new_order);
+        gather(&mut self.radius, new_order);
+        gather(&mut self.mass, new_order);
+    }
+
     /// Largest radius, 0 for an empty set.
     pub fn max_radius(&self) -> f64 {
         self.radius.iter().copied().fold(0.0, f64::max)

@@ -1,0 +1,218 @@
+//! Physics over many steps: conservation, determinism, broad-phase equivalence, walls.
+
+use collide::backend::serial;
+use collide::sim::scene::{Extent, GasSpec, MassRule, Placement, RadiusDistribution};
+use collide::sim::{Boundary, Broadphase, Physics, Stepper};
+use collide::spec::{DtChoice, MethodSpec, RunSpec, SceneSource};
+
+fn gas(
+    n_particles: usize,
+    packing: f64,
+    boundary: Boundary,
+    restitution: f64,
+    seed: u64,
+) -> GasSpec {
+    GasSpec {
+        n_particles,
+        extent: Extent::Packing(packing),
+        radius: RadiusDistribution::Fixed(1.0),
+        mass: MassRule::Fixed(1.0),
+        speed_rms: 1.0,
+        placement: Placement::Random,
+        boundary,
+        physics: Physics {
+            restitution,
+            wall_restitution: restitution,
+            gravity: None,
+        },
+        seed,
+    }
+}
+
+fn spec(gas: GasSpec, dt: f64, steps: u64, broadphase: Broadphase) -> RunSpec {
+    RunSpec {
+        scene: SceneSource::Gas(gas),
+        method: MethodSpec {
+            dt: DtChoice::Fixed(dt),
+            steps,
+            broadphase,
+        },
+    }
+}
+
+fn relative(a: f64, b: f64) -> f64 {
+    (a - b).abs() / a.abs().max(b.abs())
+}
+
+#[test]
+fn dilute_elastic_periodic_gas_conserves_momentum_and_energy_over_10000_steps() {
+    let outcome = serial::run(&spec(
+        gas(400, 0.05, Boundary::Periodic, 1.0, 7),
+        0.1,
+        10_000,
+        Broadphase::Grid,
+    ))
+    .unwrap();
+    let s = &outcome.summary;
+    assert!(
+        s.pair_collisions > 1000,
+        "the test must exercise collisions: {}",
+        s.pair_collisions
+    );
+    // Each collision conserves energy to a few ulps; 10^4 collisions of random sign
+    // accumulate to ~1e-14 relative. 1e-12 leaves room and still catches any real leak.
+    assert!(
+        relative(s.kinetic_energy_initial, s.kinetic_energy_final) < 1e-12,
+        "energy {} → {}",
+        s.kinetic_energy_initial,
+        s.kinetic_energy_final
+    );
+    // Momentum starts at ~1e-14 (drift removed): compare with the momentum scale Σ m|v|.
+    let scale = 400.0 * 1.0;
+    for axis in 0..2 {
+        let drift = (s.momentum_final[axis] - s.momentum_initial[axis]).abs() / scale;
+        assert!(
+            drift < 1e-12,
+            "momentum axis {axis} drifted by {drift} relative"
+        );
+    }
+}
+
+#[test]
+fn dilute_elastic_walled_gas_conserves_energy() {
+    let outcome = serial::run(&spec(
+        gas(400, 0.05, Boundary::Walls, 1.0, 3),
+        0.1,
+        5_000,
+        Broadphase::Grid,
+    ))
+    .unwrap();
+    let s = &outcome.summary;
+    assert!(s.wall_collisions > 100 && s.pair_collisions > 500);
+    assert!(relative(s.kinetic_energy_initial, s.kinetic_energy_final) < 1e-12);
+}
+
+#[test]
+fn grid_and_all_pairs_give_bitwise_identical_runs() {
+    for boundary in [Boundary::Walls, Boundary::Periodic] {
+        for restitution in [1.0, 0.8] {
+            for (packing, dt) in [(0.05, 0.1), (0.4, 0.05)] {
+                let gas = gas(300, packing, boundary, restitution, 11);
+                let grid = serial::run(&spec(gas, dt, 600, Broadphase::Grid))
+                    .unwrap()
+                    .summary;
+                let all_pairs = serial::run(&spec(gas, dt, 600, Broadphase::AllPairs))
+                    .unwrap()
+                    .summary;
+                assert!(
+                    grid.pair_collisions > 50,
+                    "{boundary:?} e={restitution} packing={packing}"
+                );
+                assert_eq!(
+                    grid.state_hash, all_pairs.state_hash,
+                    "{boundary:?} e={restitution} packing={packing}"
+                );
+                assert_eq!(grid.pair_collisions, all_pairs.pair_collisions);
+                assert_eq!(grid.max_overlap, all_pairs.max_overlap);
+            }
+        }
+    }
+}
+
+#[test]
+fn same_seed_same_hash_different_seed_different_hash() {
+    let run = |seed| {
+        serial::run(&spec(
+            gas(500, 0.1, Boundary::Walls, 1.0, seed),
+            0.1,
+            200,
+            Broadphase::Grid,
+        ))
+        .unwrap()
+        .summary
+        .state_hash
+    };
+    assert_eq!(run(1), run(1));
+    assert_ne!(run(1), run(2));
+}
+
+#[test]
+fn no_disk_leaves_a_walled_box_dense_and_inelastic() {
+    for (packing, restitution, placement) in [
+        (0.5, 0.3, Placement::Random),
+        (0.7, 0.0, Placement::Lattice),
+        (0.05, 1.0, Placement::Random),
+    ] {
+        let mut gas = gas(500, packing, Boundary::Walls, restitution, 5);
+        gas.placement = placement;
+        gas.speed_rms = 3.0;
+        let scene = gas.build().unwrap();
+        let mut particles = scene.particles.clone();
+        let params = collide::sim::StepParams {
+            dt: 0.03,
+            broadphase: Broadphase::Grid,
+        };
+        let mut stepper = Stepper::new(scene.domain, scene.physics, params, &particles);
+        for step in 0..3000 {
+            stepper.step(&mut particles);
+            for idx in 0..particles.len() {
+                let (x, y) = (particles.x[idx], particles.y[idx]);
+                assert!(
+                    (0.0..=scene.domain.width).contains(&x)
+                        && (0.0..=scene.domain.height).contains(&y),
+                    "packing {packing}, e {restitution}: disk {} left the box at step {step}: ({x}, {y})",
+                    particles.id[idx]
+                );
+            }
+        }
+        assert!(stepper.counters().wall_collisions > 0);
+    }
+}
+
+#[test]
+fn gravity_uses_verlet_and_a_disk_bounces_back_to_its_height() {
+    // One disk dropped from rest under g = 9.81 onto an elastic floor: constant-acceleration
+    // Verlet is exact between bounces, so energy stays to rounding and it returns to its height.
+    let toml = r#"
+        [scene]
+        size = [10.0, 10.0]
+        gravity = [0.0, -9.81]
+        [[scene.particle]]
+        x = 5.0
+        y = 8.0
+        radius = 0.5
+        [method]
+        dt = 0.0001
+        steps = 50000
+    "#;
+    let spec =
+        collide::scene_file::parse(std::path::Path::new("drop.toml"), toml, &Default::default())
+            .unwrap();
+    let prepared = spec.prepare().unwrap();
+    let mut particles = prepared.scene.particles.clone();
+    let mut stepper = Stepper::new(
+        prepared.scene.domain,
+        prepared.scene.physics,
+        prepared.params,
+        &particles,
+    );
+    let mut highest_after_bounce = 0.0_f64;
+    let mut bounced = false;
+    for _ in 0..prepared.steps {
+        stepper.step(&mut particles);
+        bounced |= stepper.counters().wall_collisions > 0;
+        if bounced {
+            highest_after_bounce = highest_after_bounce.max(particles.y[0]);
+        }
+    }
+    assert_eq!(
+        stepper.counters().wall_collisions,
+        2,
+        "the drop takes 1.2 s, the run 5 s"
+    );
+    // A bounce is detected up to one step late: the height error is O(g·dt·v·dt).
+    assert!(
+        (highest_after_bounce - 8.0).abs() < 2e-3,
+        "returned to {highest_after_bounce}"
+    );
+}

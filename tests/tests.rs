@@ -1,0 +1,4 @@
+//! All integration tests, built into one test binary.
+
+mod cli;
+mod physics;
