@@ -36,7 +36,7 @@ fn warmed_up(packing: f64) -> (Particles, Stepper) {
         dt: 0.1,
         broadphase: Broadphase::Grid,
     };
-    let mut stepper = Stepper::new(scene.domain, scene.physics, params, &particles);
+    let mut stepper = Stepper::for_scene(&scene, params);
     for _ in 0..50 {
         stepper.step(&mut particles);
     }

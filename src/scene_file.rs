@@ -193,7 +193,7 @@ impl Validator<'_> {
         }
     }
 
-    fn from_file<T: Clone>(&self, value: &Option<Spanned<T>>) -> Option<Sourced<T>> {
+    fn in_file<T: Clone>(&self, value: &Option<Spanned<T>>) -> Option<Sourced<T>> {
         value.as_ref().map(|spanned| Sourced {
             value: spanned.get_ref().clone(),
             origin: self.origin(spanned.span()),
@@ -215,7 +215,7 @@ impl Validator<'_> {
     }
 
     fn method(&self, raw: &RawMethod, overrides: &Overrides) -> Result<MethodSpec, SceneFileError> {
-        let fraction = match self.from_file(&raw.dt_fraction) {
+        let fraction = match self.in_file(&raw.dt_fraction) {
             Some(Sourced { value, origin }) => {
                 if !(value > 0.0 && value <= 1.0) {
                     return Err(self.invalid(
@@ -252,27 +252,13 @@ impl Validator<'_> {
                 }
             },
         };
-        let steps = match self.pick("--steps", overrides.steps, &raw.steps, |s| *s) {
-            None => {
-                return Err(self.invalid(
-                    Origin::Default,
-                    "method.steps",
-                    "is missing".to_owned(),
-                    "add `steps = 400` under [method] or pass --steps",
-                ));
-            }
-            Some(Sourced { value, origin }) => u64::try_from(value)
-                .ok()
-                .filter(|&steps| steps >= 1)
-                .ok_or_else(|| {
-                    self.invalid(
-                        origin,
-                        "method.steps",
-                        format!("is {value}, not a positive whole number"),
-                        "give at least 1 step",
-                    )
-                })?,
-        };
+        let steps = self.count(
+            self.pick("--steps", overrides.steps, &raw.steps, |s| *s),
+            "method.steps",
+            u64::MAX,
+            "add `steps = 400` under [method] or pass --steps",
+            "give at least 1 step",
+        )?;
         let broadphase = self
             .pick("--broadphase", overrides.broadphase, &raw.broadphase, |b| {
                 *b
@@ -286,7 +272,7 @@ impl Validator<'_> {
     }
 
     fn physics(&self, raw: &RawScene) -> Result<Physics, SceneFileError> {
-        let coefficient = |value: &Option<Spanned<f64>>, field: &str| match self.from_file(value) {
+        let coefficient = |value: &Option<Spanned<f64>>, field: &str| match self.in_file(value) {
             None => Ok(1.0),
             Some(Sourced { value, origin }) if !(0.0..=1.0).contains(&value) => Err(self.invalid(
                 origin,
@@ -298,7 +284,7 @@ impl Validator<'_> {
         };
         let restitution = coefficient(&raw.restitution, "scene.restitution")?;
         let wall_restitution = coefficient(&raw.wall_restitution, "scene.wall_restitution")?;
-        let gravity = match self.from_file(&raw.gravity) {
+        let gravity = match self.in_file(&raw.gravity) {
             None => None,
             Some(Sourced { value, origin }) => {
                 let [gx, gy] =
@@ -333,7 +319,7 @@ impl Validator<'_> {
     }
 
     fn size(&self, raw: &RawScene) -> Result<Option<(f64, f64)>, SceneFileError> {
-        let Some(Sourced { value, origin }) = self.from_file(&raw.size) else {
+        let Some(Sourced { value, origin }) = self.in_file(&raw.size) else {
             return Ok(None);
         };
         let [width, height] = self.pair(&value, origin, "scene.size", "size = [100.0, 100.0]")?;
@@ -360,6 +346,31 @@ impl Validator<'_> {
         } else {
             Err(self.invalid(origin, field, format!("is {value}, not positive"), fix))
         }
+    }
+
+    /// A required whole number in `1..=max`.
+    fn count(
+        &self,
+        sourced: Option<Sourced<i64>>,
+        field: &str,
+        max: u64,
+        fix_missing: &str,
+        fix_bad: &str,
+    ) -> Result<u64, SceneFileError> {
+        let Some(Sourced { value, origin }) = sourced else {
+            return Err(self.invalid(Origin::Default, field, "is missing".to_owned(), fix_missing));
+        };
+        u64::try_from(value)
+            .ok()
+            .filter(|count| (1..=max).contains(count))
+            .ok_or_else(|| {
+                self.invalid(
+                    origin,
+                    field,
+                    format!("is {value}, not a whole number from 1 to {max}"),
+                    fix_bad,
+                )
+            })
     }
 
     fn radius(&self, raw: &RawScene) -> Result<(RadiusDistribution, Origin), SceneFileError> {
@@ -412,29 +423,15 @@ impl Validator<'_> {
     }
 
     fn gas(&self, raw: &RawScene, overrides: &Overrides) -> Result<GasSpec, SceneFileError> {
-        let n_particles = match self.pick("--n", overrides.n, &raw.n, |n| *n) {
-            None => {
-                return Err(self.invalid(
-                    Origin::Default,
-                    "scene.n",
-                    "is missing".to_owned(),
-                    "give the number of disks, e.g. n = 1000, or list them as [[scene.particle]]",
-                ));
-            }
-            Some(Sourced { value, origin }) => usize::try_from(value)
-                .ok()
-                .filter(|&n| (1..=u32::MAX as usize).contains(&n))
-                .ok_or_else(|| {
-                    self.invalid(
-                        origin,
-                        "scene.n",
-                        format!("is {value}, not a positive number of disks"),
-                        "give at least 1 disk, e.g. n = 1000",
-                    )
-                })?,
-        };
+        let n_particles = self.count(
+            self.pick("--n", overrides.n, &raw.n, |n| *n),
+            "scene.n",
+            u64::from(u32::MAX),
+            "give the number of disks, e.g. n = 1000, or list them as [[scene.particle]]",
+            "give at least 1 disk, e.g. n = 1000",
+        )? as usize;
         let placement = self
-            .from_file(&raw.placement)
+            .in_file(&raw.placement)
             .map_or(Placement::Random, |sourced| sourced.value);
         let packing = self.pick("--packing", overrides.packing, &raw.packing, |p| *p);
         let extent = match (packing, self.size(raw)?) {
@@ -472,7 +469,7 @@ impl Validator<'_> {
                 ));
             }
         };
-        let speed_rms = match self.from_file(&raw.speed_rms) {
+        let speed_rms = match self.in_file(&raw.speed_rms) {
             None => 1.0,
             Some(Sourced { value, origin }) if !(value >= 0.0 && value.is_finite()) => {
                 return Err(self.invalid(
@@ -492,7 +489,7 @@ impl Validator<'_> {
             speed_rms,
             placement,
             boundary: self
-                .from_file(&raw.boundary)
+                .in_file(&raw.boundary)
                 .map_or(Boundary::Walls, |s| s.value),
             physics: self.physics(raw)?,
             seed: self
@@ -553,7 +550,7 @@ impl Validator<'_> {
             width,
             height,
             boundary: self
-                .from_file(&raw.boundary)
+                .in_file(&raw.boundary)
                 .map_or(Boundary::Walls, |s| s.value),
         };
         let (default_radius, radius_origin) = match self.radius(raw)? {
@@ -642,7 +639,7 @@ impl Validator<'_> {
         let particles = Particles::from_disks(&disks);
         if check_periodic_box(&domain, particles.max_radius()).is_err() {
             return Err(self.invalid(
-                self.from_file(&raw.size)
+                self.in_file(&raw.size)
                     .map_or(Origin::Default, |s| s.origin),
                 "scene.size",
                 format!(

@@ -14,12 +14,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, PlacementError> {
     let setup_start = Instant::now();
     let prepared = spec.prepare()?;
     let mut particles = prepared.scene.particles.clone();
-    let mut stepper = Stepper::new(
-        prepared.scene.domain,
-        prepared.scene.physics,
-        prepared.params,
-        &particles,
-    );
+    let mut stepper = Stepper::for_scene(&prepared.scene, prepared.params);
     let setup_s = setup_start.elapsed().as_secs_f64();
     let initial = observe(&particles);
 

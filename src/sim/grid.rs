@@ -94,10 +94,6 @@ impl StripGrid {
         }
     }
 
-    pub fn n_strips(&self) -> usize {
-        self.n_strips
-    }
-
     /// Storage indices in sorted order (strip, then x), as of the last build.
     pub fn sorted_indices(&self) -> Vec<u32> {
         self.entries.iter().map(|entry| entry.idx).collect()

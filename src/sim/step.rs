@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use super::collision::resolve_contact;
 use super::grid::{Contact, StripGrid, find_contacts_all_pairs};
 use super::particles::Particles;
-use super::scene::{Boundary, Domain, Physics, wrap_periodic};
+use super::scene::{Boundary, Domain, Physics, Scene, wrap_periodic};
 
 /// Grid builds between re-storings of the disks in grid order.
 const REORDER_INTERVAL: u32 = 16;
@@ -83,6 +83,11 @@ impl Stepper {
             contacts: Vec::new(),
             counters: StepCounters::default(),
         }
+    }
+
+    /// A stepper for the disks of `scene`.
+    pub fn for_scene(scene: &Scene, params: StepParams) -> Self {
+        Stepper::new(scene.domain, scene.physics, params, &scene.particles)
     }
 
     pub fn counters(&self) -> StepCounters {
@@ -216,7 +221,7 @@ fn reflect_at_walls(
     for ((&p, v), &r) in positions.iter().zip(velocities).zip(radii) {
         let outward = (p - r < 0.0 && *v < 0.0) || (p + r > length && *v > 0.0);
         if outward {
-            *v = -wall_restitution * *v;
+            *v *= -wall_restitution;
             hits += 1;
         }
     }
