@@ -30,7 +30,10 @@ pub struct Overrides {
 
 /// A time step as written: a number or the word "auto".
 #[derive(Clone, Debug, PartialEq, Deserialize)]
-#[serde(untagged)]
+#[serde(
+    untagged,
+    expecting = "expected a time step: a number such as 0.01, or \"auto\""
+)]
 pub enum DtValue {
     Seconds(f64),
     Word(String),
@@ -44,7 +47,7 @@ pub enum SceneFileError {
         source: std::io::Error,
     },
     #[error(
-        "{path}:{line}: {message}; fix the syntax or remove unknown keys (see README, \"Scene files\")"
+        "{path}:{line}: {message}; see the README section Scene files for the keys and values a scene accepts"
     )]
     Syntax {
         path: PathBuf,
@@ -113,14 +116,20 @@ struct RawScene {
 }
 
 #[derive(Deserialize)]
-#[serde(untagged)]
+#[serde(
+    untagged,
+    expecting = "expected a radius: a number such as 1.0, or a range such as { min = 0.5, max = 1.5 }"
+)]
 enum RawRadius {
     Fixed(f64),
     Range { min: f64, max: f64 },
 }
 
 #[derive(Deserialize)]
-#[serde(untagged)]
+#[serde(
+    untagged,
+    expecting = "expected a mass: a number such as 1.0, or \"area\""
+)]
 enum RawMass {
     Fixed(f64),
     Rule(String),
@@ -452,7 +461,10 @@ impl Validator<'_> {
                     return Err(self.invalid(
                         origin,
                         "scene.packing",
-                        format!("is {value}, outside (0, {limit}] for {placement:?} placement"),
+                        format!(
+                            "is {value}, outside (0, {limit:.3}], the range {} placement reaches",
+                            placement.name()
+                        ),
                         "random sequential addition jams near 0.547 and a square lattice holds at most π/4; \
                          lower the packing, or use placement = \"lattice\" for dense scenes",
                     ));

@@ -203,6 +203,16 @@ fn bad_scenes_are_rejected_with_file_line_field_and_fix() {
             ],
         ),
         (
+            "radius-word.toml",
+            "[scene]\nn = 10\npacking = 0.05\nradius = \"big\"\n[method]\nsteps = 1\n",
+            &["radius-word.toml:4", "expected a radius", "min = 0.5"],
+        ),
+        (
+            "boundary.toml",
+            "[scene]\nn = 10\npacking = 0.05\nboundary = \"wall\"\n[method]\nsteps = 1\n",
+            &["boundary.toml:4", "`walls` or `periodic`"],
+        ),
+        (
             "outside.toml",
             "[scene]\nsize = [10.0, 10.0]\n[[scene.particle]]\nx = 9.5\ny = 5.0\n[method]\nsteps = 1\n",
             &["outside.toml:3", "scene.particle[0]", "inside"],

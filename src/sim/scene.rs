@@ -194,6 +194,15 @@ pub enum Placement {
     Lattice,
 }
 
+impl Placement {
+    pub fn name(self) -> &'static str {
+        match self {
+            Placement::Random => "random",
+            Placement::Lattice => "lattice",
+        }
+    }
+}
+
 /// How big the box is: by area fraction (square box) or by explicit size.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Extent {
