@@ -80,9 +80,11 @@ impl StripGrid {
     ///
     /// A periodic domain must be at least three contact diameters across
     /// (`scene::check_periodic_box`), so no pair is found through two images.
-    pub fn new(domain: &Domain, max_radius: f64) -> StripGrid {
+    pub fn new(domain: &Domain, max_radius: f64, n_particles: usize) -> StripGrid {
         let contact = 2.0 * max_radius;
-        let n_strips = ((domain.height / contact).floor() as usize).max(1);
+        // Strips at least one contact diameter tall, and (in sparse boxes) no more strips
+        // than disks; never fewer than three in a periodic box, which is that tall.
+        let n_strips = ((domain.height / contact).floor() as usize).clamp(1, n_particles.max(3));
         StripGrid {
             n_strips,
             inv_strip_height: n_strips as f64 / domain.height,

@@ -348,7 +348,9 @@ fn place_random(
 ) -> Result<Vec<(f64, f64)>, PlacementError> {
     const NONE: u32 = u32::MAX;
     let max_radius = radii.iter().copied().fold(0.0, f64::max);
-    let cell = 2.0 * max_radius;
+    // At least one contact diameter; wider in sparse boxes, so the grid never has more
+    // cells than disks.
+    let cell = (2.0 * max_radius).max((domain.area() / radii.len() as f64).sqrt());
     let n_cols = ((domain.width / cell).floor() as usize).max(1);
     let n_rows = ((domain.height / cell).floor() as usize).max(1);
     let (cell_w, cell_h) = (domain.width / n_cols as f64, domain.height / n_rows as f64);
@@ -382,8 +384,8 @@ fn place_random(
                 });
             }
             tries += 1;
-            let x = rng.random_range(lo_x..hi_x.max(lo_x + f64::MIN_POSITIVE));
-            let y = rng.random_range(lo_y..hi_y.max(lo_y + f64::MIN_POSITIVE));
+            let x = uniform_in(rng, lo_x, hi_x);
+            let y = uniform_in(rng, lo_y, hi_y);
             let (cx, cy) = cell_of(x, y);
             let mut free = true;
             'cells: for dy in -1i64..=1 {
@@ -416,6 +418,15 @@ fn place_random(
         positions.push((x, y));
     }
     Ok(positions)
+}
+
+/// Uniform in `[low, high)`, or `low` when the interval is a single point.
+fn uniform_in(rng: &mut Xoshiro256PlusPlus, low: f64, high: f64) -> f64 {
+    if high > low {
+        rng.random_range(low..high)
+    } else {
+        low
+    }
 }
 
 /// The neighbour of cell (cx, cy) at offset (dx, dy), wrapped when periodic.

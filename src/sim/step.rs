@@ -78,7 +78,7 @@ impl Stepper {
             domain,
             physics,
             params,
-            grid: StripGrid::new(&domain, particles.max_radius()),
+            grid: StripGrid::new(&domain, particles.max_radius(), particles.len()),
             builds_since_reorder: 0,
             contacts: Vec::new(),
             counters: StepCounters::default(),
