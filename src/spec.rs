@@ -51,7 +51,7 @@ pub struct PreparedRun {
     pub params: StepParams,
     pub steps: u64,
     /// `Some(fraction)` when dt was chosen automatically.
-    pub auto_dt_fraction: Option<f64>,
+    pub dt_auto_fraction: Option<f64>,
     pub seed: Option<u64>,
 }
 
@@ -62,7 +62,7 @@ impl RunSpec {
             SceneSource::Gas(gas) => (gas.build()?, Some(gas.seed)),
             SceneSource::Explicit(scene) => (scene.clone(), None),
         };
-        let (dt, auto_dt_fraction) = match self.method.dt {
+        let (dt, dt_auto_fraction) = match self.method.dt {
             DtChoice::Fixed(dt) => (dt, None),
             DtChoice::Auto { fraction } => (
                 auto_dt(&scene.particles, &scene.domain, &scene.physics, fraction),
@@ -76,7 +76,7 @@ impl RunSpec {
                 broadphase: self.method.broadphase,
             },
             steps: self.method.steps,
-            auto_dt_fraction,
+            dt_auto_fraction,
             seed,
         })
     }

@@ -31,7 +31,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, PlacementError> {
         n,
         steps: prepared.steps,
         dt: prepared.params.dt,
-        dt_auto_fraction: prepared.auto_dt_fraction,
+        dt_auto_fraction: prepared.dt_auto_fraction,
         backend: "serial".to_owned(),
         workers: 1,
         boundary: prepared.scene.domain.boundary.name().to_owned(),
