@@ -515,32 +515,33 @@ impl Validator<'_> {
         raw: &RawScene,
         overrides: &Overrides,
     ) -> Result<SceneSource, SceneFileError> {
-        let random_only: [(&str, Option<Origin>); 7] = [
-            ("scene.n", raw.n.as_ref().map(|s| self.origin(s.span()))),
+        let file_origin = |span: Option<Range<usize>>| span.map(|span| self.origin(span));
+        let random_only = [
+            ("scene.n", file_origin(raw.n.as_ref().map(Spanned::span))),
             (
                 "scene.packing",
-                raw.packing.as_ref().map(|s| self.origin(s.span())),
+                file_origin(raw.packing.as_ref().map(Spanned::span)),
             ),
             (
                 "scene.speed_rms",
-                raw.speed_rms.as_ref().map(|s| self.origin(s.span())),
+                file_origin(raw.speed_rms.as_ref().map(Spanned::span)),
             ),
             (
                 "scene.seed",
-                raw.seed.as_ref().map(|s| self.origin(s.span())),
+                file_origin(raw.seed.as_ref().map(Spanned::span)),
             ),
             (
                 "scene.placement",
-                raw.placement.as_ref().map(|s| self.origin(s.span())),
+                file_origin(raw.placement.as_ref().map(Spanned::span)),
             ),
             ("--n", overrides.n.map(|_| Origin::Flag("--n"))),
             (
                 "--packing",
                 overrides.packing.map(|_| Origin::Flag("--packing")),
             ),
+            ("--seed", overrides.seed.map(|_| Origin::Flag("--seed"))),
         ];
-        let seed_flag = overrides.seed.map(|_| Origin::Flag("--seed"));
-        for (field, origin) in random_only.into_iter().chain([("--seed", seed_flag)]) {
+        for (field, origin) in random_only {
             if let Some(origin) = origin {
                 return Err(self.invalid(
                     origin,

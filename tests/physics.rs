@@ -4,6 +4,7 @@ use collide::backend::serial;
 use collide::sim::scene::{Extent, GasSpec, MassRule, Placement, RadiusDistribution};
 use collide::sim::{Boundary, Broadphase, Physics, Stepper};
 use collide::spec::{DtChoice, MethodSpec, RunSpec, SceneSource};
+use collide::summary::RunSummary;
 
 fn gas(
     n_particles: usize,
@@ -40,20 +41,25 @@ fn spec(gas: GasSpec, dt: f64, steps: u64, broadphase: Broadphase) -> RunSpec {
     }
 }
 
+/// Runs a gas on the serial backend and returns its summary.
+fn summary_of(gas: GasSpec, dt: f64, steps: u64, broadphase: Broadphase) -> RunSummary {
+    serial::run(&spec(gas, dt, steps, broadphase))
+        .unwrap()
+        .summary
+}
+
 fn relative(a: f64, b: f64) -> f64 {
     (a - b).abs() / a.abs().max(b.abs())
 }
 
 #[test]
 fn dilute_elastic_periodic_gas_conserves_momentum_and_energy_over_10000_steps() {
-    let outcome = serial::run(&spec(
+    let s = &summary_of(
         gas(400, 0.05, Boundary::Periodic, 1.0, 7),
         0.1,
         10_000,
         Broadphase::Grid,
-    ))
-    .unwrap();
-    let s = &outcome.summary;
+    );
     assert!(
         s.pair_collisions > 1000,
         "the test must exercise collisions: {}",
@@ -80,14 +86,12 @@ fn dilute_elastic_periodic_gas_conserves_momentum_and_energy_over_10000_steps() 
 
 #[test]
 fn dilute_elastic_walled_gas_conserves_energy() {
-    let outcome = serial::run(&spec(
+    let s = &summary_of(
         gas(400, 0.05, Boundary::Walls, 1.0, 3),
         0.1,
         5_000,
         Broadphase::Grid,
-    ))
-    .unwrap();
-    let s = &outcome.summary;
+    );
     assert!(s.wall_collisions > 100 && s.pair_collisions > 500);
     assert!(relative(s.kinetic_energy_initial, s.kinetic_energy_final) < 1e-12);
 }
@@ -98,12 +102,8 @@ fn grid_and_all_pairs_give_bitwise_identical_runs() {
         for restitution in [1.0, 0.8] {
             for (packing, dt) in [(0.05, 0.1), (0.4, 0.05)] {
                 let gas = gas(300, packing, boundary, restitution, 11);
-                let grid = serial::run(&spec(gas, dt, 600, Broadphase::Grid))
-                    .unwrap()
-                    .summary;
-                let all_pairs = serial::run(&spec(gas, dt, 600, Broadphase::AllPairs))
-                    .unwrap()
-                    .summary;
+                let grid = summary_of(gas, dt, 600, Broadphase::Grid);
+                let all_pairs = summary_of(gas, dt, 600, Broadphase::AllPairs);
                 assert!(
                     grid.pair_collisions > 50,
                     "{boundary:?} e={restitution} packing={packing}"
@@ -122,14 +122,12 @@ fn grid_and_all_pairs_give_bitwise_identical_runs() {
 #[test]
 fn same_seed_same_hash_different_seed_different_hash() {
     let run = |seed| {
-        serial::run(&spec(
+        summary_of(
             gas(500, 0.1, Boundary::Walls, 1.0, seed),
             0.1,
             200,
             Broadphase::Grid,
-        ))
-        .unwrap()
-        .summary
+        )
         .state_hash
     };
     assert_eq!(run(1), run(1));

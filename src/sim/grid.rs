@@ -1,4 +1,4 @@
-//! Broad phase: which disks overlap, found by a cell list (or all pairs, for comparison).
+//! Broad phase: which disks overlap, found by sorted strips (or all pairs, for comparison).
 //!
 //! Both searches report the same set of overlapping pairs, tested with the same
 //! arithmetic ([`Domain::separation_in`]), so the two broad phases give bit-identical
@@ -71,8 +71,6 @@ pub struct StripGrid {
     /// `strip_start[s]..strip_start[s + 1]` are the slots of strip `s` in `entries`.
     strip_start: Vec<u32>,
     entries: Vec<Entry>,
-    /// False until the first build, which sorts from scratch.
-    sorted: bool,
 }
 
 impl StripGrid {
@@ -92,7 +90,6 @@ impl StripGrid {
             reach: contact * (1.0 + 1e-9),
             strip_start: vec![0; n_strips + 1],
             entries: Vec::new(),
-            sorted: false,
         }
     }
 
@@ -114,7 +111,10 @@ impl StripGrid {
     pub fn build(&mut self, particles: &Particles) {
         let max_strip = self.n_strips - 1;
         let strip_of = |y: f64| ((y * self.inv_strip_height) as usize).min(max_strip) as u32;
-        if !self.sorted || self.entries.len() != particles.len() {
+        // The first build (or one for a different set of disks) sorts from scratch; later
+        // ones start from the previous order.
+        let from_scratch = self.entries.len() != particles.len();
+        if from_scratch {
             self.entries = (0..particles.len())
                 .map(|idx| Entry {
                     x: particles.x[idx],
@@ -137,12 +137,11 @@ impl StripGrid {
         for strip in 0..self.n_strips {
             self.strip_start[strip + 1] += self.strip_start[strip];
         }
-        if self.sorted {
-            insertion_sort(&mut self.entries);
-        } else {
+        if from_scratch {
             self.entries
                 .sort_unstable_by(|a, b| a.strip.cmp(&b.strip).then(a.x.total_cmp(&b.x)));
-            self.sorted = true;
+        } else {
+            insertion_sort(&mut self.entries);
         }
     }
 

@@ -96,26 +96,21 @@ fn minimum_image(d: f64, length: f64) -> f64 {
 /// Maps a coordinate back into `[0, length)` after a periodic disk crossed an edge.
 #[inline(always)]
 pub fn wrap_periodic(coordinate: f64, length: f64) -> f64 {
-    if coordinate >= length {
-        let wrapped = coordinate - length;
-        // A coordinate that left by more than a box length is outside any sane dt;
-        // rem_euclid keeps it in range all the same.
-        if wrapped < length {
-            wrapped
-        } else {
-            coordinate.rem_euclid(length)
-        }
+    let wrapped = if coordinate >= length {
+        coordinate - length
     } else if coordinate < 0.0 {
-        let wrapped = coordinate + length;
-        // -1e-20 + length rounds to length itself: that point belongs at 0.
-        if wrapped < length {
-            wrapped.max(0.0)
-        } else {
-            0.0
-        }
+        coordinate + length
     } else {
-        coordinate
-    }
+        return coordinate;
+    };
+    // One box length covers any sane step; rem_euclid covers a disk that crossed more.
+    let wrapped = if (0.0..=length).contains(&wrapped) {
+        wrapped
+    } else {
+        coordinate.rem_euclid(length)
+    };
+    // -1e-20 + length rounds to length itself: that point belongs at 0.
+    if wrapped < length { wrapped } else { 0.0 }
 }
 
 /// Contact laws and external field of a scene.
@@ -524,4 +519,20 @@ fn maxwellian_velocities(
         v.1 *= scale;
     }
     velocities
+}
+
+#[cfg(test)]
+mod tests {
+    use super::wrap_periodic;
+
+    #[test]
+    fn periodic_wrap_lands_in_the_box_from_either_side_and_any_distance() {
+        assert_eq!(wrap_periodic(3.5, 10.0), 3.5);
+        assert_eq!(wrap_periodic(10.0, 10.0), 0.0);
+        assert_eq!(wrap_periodic(12.5, 10.0), 2.5);
+        assert_eq!(wrap_periodic(-2.5, 10.0), 7.5);
+        assert_eq!(wrap_periodic(-1e-20, 10.0), 0.0);
+        assert_eq!(wrap_periodic(35.0, 10.0), 5.0);
+        assert_eq!(wrap_periodic(-25.0, 10.0), 5.0);
+    }
 }
