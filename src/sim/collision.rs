@@ -28,12 +28,75 @@ pub struct ContactOutcome {
     pub collided: bool,
 }
 
-/// Resolves the pair stored at `a` and `b` if the disks overlap and approach.
+/// What one disk of a pair brings to a collision: its mass and velocity.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PairSide {
+    pub mass: f64,
+    pub vx: f64,
+    pub vy: f64,
+}
+
+/// The impulse law applied to one pair, on values only, so every backend (serial,
+/// threads, ranks) runs the same arithmetic.
 ///
-/// A pair that overlaps but already separates (v_rel · n ≥ 0) is left alone, so
-/// overlapping disks never stick or jitter. Coincident centres have no line of
-/// centres and are left alone too. `a` must be the disk with the lower id: the
-/// orientation is part of the canonical order that makes results reproducible.
+/// `dx, dy` is the separation from a to b ([`Domain::separation`]), `contact` is
+/// `r_a + r_b`. Returns the outcome and, when an impulse was applied, the new
+/// velocities `[vx, vy]` of a and b. A pair that overlaps but already separates
+/// (v_rel · n ≥ 0) is left alone, so overlapping disks never stick or jitter.
+/// Coincident centres have no line of centres and are left alone too.
+#[inline(always)]
+pub fn collide_pair(
+    restitution: f64,
+    dx: f64,
+    dy: f64,
+    contact: f64,
+    a: PairSide,
+    b: PairSide,
+) -> (ContactOutcome, Option<[[f64; 2]; 2]>) {
+    let distance_sq = dx * dx + dy * dy;
+    if distance_sq >= contact * contact || distance_sq == 0.0 {
+        let outcome = ContactOutcome {
+            overlap_fraction: 0.0,
+            collided: false,
+        };
+        return (outcome, None);
+    }
+    let distance = distance_sq.sqrt();
+    let overlap_fraction = (contact - distance) / contact;
+    let (dvx, dvy) = (b.vx - a.vx, b.vy - a.vy);
+    if dvx * dx + dvy * dy >= 0.0 {
+        let outcome = ContactOutcome {
+            overlap_fraction,
+            collided: false,
+        };
+        return (outcome, None);
+    }
+    let (nx, ny) = (dx / distance, dy / distance);
+    let ua = a.vx * nx + a.vy * ny;
+    let ub = b.vx * nx + b.vy * ny;
+    let (ua_after, ub_after) = normal_velocities_after(a.mass, b.mass, restitution, ua, ub);
+    // v' = v_t + u'·n with v_t = v − u·n: along an axis the tangential part is exactly zero,
+    // so a head-on exchange of equal masses swaps the bits exactly.
+    let velocities = [
+        [
+            (a.vx - ua * nx) + ua_after * nx,
+            (a.vy - ua * ny) + ua_after * ny,
+        ],
+        [
+            (b.vx - ub * nx) + ub_after * nx,
+            (b.vy - ub * ny) + ub_after * ny,
+        ],
+    ];
+    let outcome = ContactOutcome {
+        overlap_fraction,
+        collided: true,
+    };
+    (outcome, Some(velocities))
+}
+
+/// Resolves the pair stored at `a` and `b` with [`collide_pair`]. `a` must be the disk
+/// with the lower id: the orientation is part of the canonical order that makes results
+/// reproducible.
 #[inline]
 pub fn resolve_contact(
     particles: &mut Particles,
@@ -48,47 +111,20 @@ pub fn resolve_contact(
         particles.x[b],
         particles.y[b],
     );
+    let side = |idx: usize| PairSide {
+        mass: particles.mass[idx],
+        vx: particles.vx[idx],
+        vy: particles.vy[idx],
+    };
     let contact = particles.radius[a] + particles.radius[b];
-    let distance_sq = dx * dx + dy * dy;
-    if distance_sq >= contact * contact || distance_sq == 0.0 {
-        return ContactOutcome {
-            overlap_fraction: 0.0,
-            collided: false,
-        };
+    let (outcome, velocities) = collide_pair(restitution, dx, dy, contact, side(a), side(b));
+    if let Some([[vax, vay], [vbx, vby]]) = velocities {
+        particles.vx[a] = vax;
+        particles.vy[a] = vay;
+        particles.vx[b] = vbx;
+        particles.vy[b] = vby;
     }
-    let distance = distance_sq.sqrt();
-    let overlap_fraction = (contact - distance) / contact;
-    let (dvx, dvy) = (
-        particles.vx[b] - particles.vx[a],
-        particles.vy[b] - particles.vy[a],
-    );
-    if dvx * dx + dvy * dy >= 0.0 {
-        return ContactOutcome {
-            overlap_fraction,
-            collided: false,
-        };
-    }
-    let (nx, ny) = (dx / distance, dy / distance);
-    let (vax, vay, vbx, vby) = (
-        particles.vx[a],
-        particles.vy[a],
-        particles.vx[b],
-        particles.vy[b],
-    );
-    let ua = vax * nx + vay * ny;
-    let ub = vbx * nx + vby * ny;
-    let (ua_after, ub_after) =
-        normal_velocities_after(particles.mass[a], particles.mass[b], restitution, ua, ub);
-    // v' = v_t + u'·n with v_t = v − u·n: along an axis the tangential part is exactly zero,
-    // so a head-on exchange of equal masses swaps the bits exactly.
-    particles.vx[a] = (vax - ua * nx) + ua_after * nx;
-    particles.vy[a] = (vay - ua * ny) + ua_after * ny;
-    particles.vx[b] = (vbx - ub * nx) + ub_after * nx;
-    particles.vy[b] = (vby - ub * ny) + ub_after * ny;
-    ContactOutcome {
-        overlap_fraction,
-        collided: true,
-    }
+    outcome
 }
 
 #[cfg(test)]

@@ -4,6 +4,8 @@
 //! arithmetic ([`Domain::separation_in`]), so the two broad phases give bit-identical
 //! runs. The order in which pairs are found is not canonical; the stepper sorts them.
 
+use std::ops::Range;
+
 use super::particles::Particles;
 use super::scene::{Boundary, Domain};
 
@@ -34,21 +36,66 @@ impl Contact {
     }
 }
 
-/// One disk in the sorted view: what the pair scan reads, 32 bytes, in (strip, x) order.
+/// One disk in the sorted view: what the pair scan reads, 32 bytes, kept in x order
+/// inside its strip.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct Entry {
+pub struct Entry {
     x: f64,
     y: f64,
     radius: f64,
     /// Storage index of the disk.
     idx: u32,
+    /// Global index of the strip the disk is in.
     strip: u32,
 }
 
 impl Entry {
+    /// Storage index of the disk.
+    pub fn idx(&self) -> u32 {
+        self.idx
+    }
+
+    /// Global index of the strip the disk was in at the last refresh.
+    pub fn strip(&self) -> usize {
+        self.strip as usize
+    }
+}
+
+/// How the box is cut into strips: shared, read-only, by every band and rank.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StripLayout {
+    /// Strips across the whole box.
+    pub n_strips: usize,
+    inv_strip_height: f64,
+    width: f64,
+    /// Largest contact distance, widened by a relative 1e-9 so that the window never
+    /// rejects a pair the exact test (done with the shared arithmetic) would accept.
+    reach: f64,
+}
+
+impl StripLayout {
+    /// Strips at least one contact diameter (`2 · max_radius`) tall over the whole box.
+    ///
+    /// In sparse boxes there are no more strips than disks; a periodic box must be at
+    /// least three contact diameters tall (`scene::check_periodic_box`), so it has at
+    /// least three strips and no pair is found through two images.
+    pub fn new(domain: &Domain, max_radius: f64, n_particles: usize) -> StripLayout {
+        let contact = 2.0 * max_radius;
+        let n_strips = ((domain.height / contact).floor() as usize).clamp(1, n_particles.max(3));
+        StripLayout {
+            n_strips,
+            inv_strip_height: n_strips as f64 / domain.height,
+            width: domain.width,
+            reach: contact * (1.0 + 1e-9),
+        }
+    }
+
+    /// The strip a disk at height `y` belongs to. Disks outside a walled box go to the
+    /// nearest edge strip, which still holds every disk they can touch; `as usize`
+    /// saturates, so negative heights (and NaN) land in strip 0.
     #[inline(always)]
-    fn before(&self, other: &Entry) -> bool {
-        self.strip < other.strip || (self.strip == other.strip && self.x < other.x)
+    pub fn strip_of(&self, y: f64) -> usize {
+        ((y * self.inv_strip_height) as usize).min(self.n_strips - 1)
     }
 }
 
@@ -58,94 +105,195 @@ impl Entry {
 /// Each disk is tested against the disks after it in its own strip while their x
 /// distance is below one diameter, and against the disks of the strip above within one
 /// diameter in x: about 3·ρ·d² candidates per disk. The sorted order persists between
-/// steps, so re-sorting is an insertion sort over the few disks that moved past a
-/// neighbour or into another strip: O(N) per step. Scratch memory only.
+/// steps: a refresh re-sorts each strip by insertion (the disks barely moved) and
+/// merges in the few that changed strip, so a build is O(N). Scratch memory only.
+///
+/// A grid can hold a window of the strips (a rank's subdomain): it owns the strips
+/// `first..first + n_owned`, finds the pairs whose scanning disk lies in them, and may
+/// hold one more, read-only ghost strip above them: copies of the next strip's disks.
+/// Every strip is its own vector, so bands of strips can be refreshed and scanned by
+/// different threads.
 #[derive(Clone, Debug)]
 pub struct StripGrid {
-    n_strips: usize,
-    inv_strip_height: f64,
-    width: f64,
-    /// Largest contact distance, widened by a relative 1e-9 so that the window never
-    /// rejects a pair the exact test (done with the shared arithmetic) would accept.
-    reach: f64,
-    /// `strip_start[s]..strip_start[s + 1]` are the slots of strip `s` in `entries`.
-    strip_start: Vec<u32>,
-    entries: Vec<Entry>,
+    layout: StripLayout,
+    /// Global index of `strips[0]`.
+    first: usize,
+    n_owned: usize,
+    /// `strips[..n_owned]` are owned; `strips[n_owned]`, if present, is the ghost strip.
+    strips: Vec<Vec<Entry>>,
+    /// All strips of a periodic box: the strip above the last one is the first.
+    north_wraps: bool,
+    movers: Vec<Entry>,
 }
 
 impl StripGrid {
-    /// A grid for disks no larger than `max_radius` in `domain`.
-    ///
-    /// A periodic domain must be at least three contact diameters across
-    /// (`scene::check_periodic_box`), so no pair is found through two images.
+    /// A grid over the whole box for disks no larger than `max_radius`.
     pub fn new(domain: &Domain, max_radius: f64, n_particles: usize) -> StripGrid {
-        let contact = 2.0 * max_radius;
-        // Strips at least one contact diameter tall, and (in sparse boxes) no more strips
-        // than disks; never fewer than three in a periodic box, which is that tall.
-        let n_strips = ((domain.height / contact).floor() as usize).clamp(1, n_particles.max(3));
+        let layout = StripLayout::new(domain, max_radius, n_particles);
+        StripGrid::window(domain, layout, 0..layout.n_strips)
+    }
+
+    /// A grid owning the strips `owned` (global indices, not empty) of `layout`, with a
+    /// ghost strip when the strip above the last owned one exists and is not owned.
+    pub fn window(domain: &Domain, layout: StripLayout, owned: Range<usize>) -> StripGrid {
+        debug_assert!(!owned.is_empty() && owned.end <= layout.n_strips);
+        let whole = owned.start == 0 && owned.end == layout.n_strips;
+        let periodic = domain.boundary == Boundary::Periodic;
+        let has_ghost = !whole && (owned.end < layout.n_strips || periodic);
         StripGrid {
-            n_strips,
-            inv_strip_height: n_strips as f64 / domain.height,
-            width: domain.width,
-            reach: contact * (1.0 + 1e-9),
-            strip_start: vec![0; n_strips + 1],
-            entries: Vec::new(),
+            layout,
+            first: owned.start,
+            n_owned: owned.len(),
+            strips: vec![Vec::new(); owned.len() + usize::from(has_ghost)],
+            north_wraps: whole && periodic,
+            movers: Vec::new(),
         }
     }
 
-    /// Storage indices in sorted order (strip, then x), as of the last build.
+    pub fn layout(&self) -> &StripLayout {
+        &self.layout
+    }
+
+    /// Owned strips, as global indices.
+    pub fn owned(&self) -> Range<usize> {
+        self.first..self.first + self.n_owned
+    }
+
+    /// Global index of the ghost strip, if this grid has one.
+    pub fn ghost_strip(&self) -> Option<usize> {
+        (self.strips.len() > self.n_owned)
+            .then(|| (self.first + self.n_owned) % self.layout.n_strips)
+    }
+
+    /// Disks in the owned strips.
+    pub fn len(&self) -> usize {
+        self.strips[..self.n_owned].iter().map(Vec::len).sum()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Storage indices in sorted order (strip, then x) over the owned strips, as of the
+    /// last build.
     pub fn sorted_indices(&self) -> Vec<u32> {
-        self.entries.iter().map(|entry| entry.idx).collect()
+        self.strips[..self.n_owned]
+            .iter()
+            .flatten()
+            .map(|entry| entry.idx)
+            .collect()
     }
 
     /// Tells the grid that the caller stored the disks in [`StripGrid::sorted_indices`]
     /// order, so slot and storage index now coincide.
     pub fn storage_now_sorted(&mut self) {
-        for (slot, entry) in self.entries.iter_mut().enumerate() {
+        let entries = self.strips[..self.n_owned].iter_mut().flatten();
+        for (slot, entry) in entries.enumerate() {
             entry.idx = slot as u32;
         }
     }
 
-    /// Re-sorts the disks by strip and x. Disks outside a walled box go to the nearest
-    /// edge strip, which still holds every disk they can touch.
-    pub fn build(&mut self, particles: &Particles) {
-        let max_strip = self.n_strips - 1;
-        let strip_of = |y: f64| ((y * self.inv_strip_height) as usize).min(max_strip) as u32;
-        // The first build (or one for a different set of disks) sorts from scratch; later
-        // ones start from the previous order.
-        let from_scratch = self.entries.len() != particles.len();
-        if from_scratch {
-            self.entries = (0..particles.len())
-                .map(|idx| Entry {
-                    x: particles.x[idx],
-                    y: particles.y[idx],
-                    radius: particles.radius[idx],
-                    idx: idx as u32,
-                    strip: 0,
-                })
-                .collect();
+    /// The owned entries of the strip with global index `strip`, in x order.
+    pub fn strip_entries(&self, strip: usize) -> &[Entry] {
+        &self.strips[strip - self.first]
+    }
+
+    /// Sorts the disks stored at `indices` (all in owned strips) into the grid from
+    /// scratch, dropping whatever it held.
+    pub fn fill(&mut self, particles: &Particles, indices: impl Iterator<Item = usize>) {
+        for strip in &mut self.strips {
+            strip.clear();
         }
-        self.strip_start.fill(0);
-        for entry in &mut self.entries {
-            let idx = entry.idx as usize;
-            entry.x = particles.x[idx];
-            entry.y = particles.y[idx];
-            // `as usize` saturates: negative coordinates (and NaN) land in strip 0.
-            entry.strip = strip_of(entry.y);
-            self.strip_start[entry.strip as usize + 1] += 1;
+        for idx in indices {
+            let entry = self.entry(particles, idx);
+            self.strips[entry.strip() - self.first].push(entry);
         }
-        for strip in 0..self.n_strips {
-            self.strip_start[strip + 1] += self.strip_start[strip];
-        }
-        if from_scratch {
-            self.entries
-                .sort_unstable_by(|a, b| a.strip.cmp(&b.strip).then(a.x.total_cmp(&b.x)));
-        } else {
-            insertion_sort(&mut self.entries);
+        for strip in &mut self.strips[..self.n_owned] {
+            strip.sort_unstable_by(|a, b| a.x.total_cmp(&b.x));
         }
     }
 
-    /// Appends every overlapping pair to `contacts` (in no particular order).
+    /// The entry of the disk stored at `idx`, in the strip its height gives.
+    pub fn entry(&self, particles: &Particles, idx: usize) -> Entry {
+        let y = particles.y[idx];
+        Entry {
+            x: particles.x[idx],
+            y,
+            radius: particles.radius[idx],
+            idx: idx as u32,
+            strip: self.layout.strip_of(y) as u32,
+        }
+    }
+
+    /// Replaces the ghost strip with the disks stored at `indices`, given in x order
+    /// (they are the next strip's disks, in the order their owner keeps them).
+    pub fn set_ghosts(&mut self, particles: &Particles, indices: Range<usize>) {
+        let strip = self.ghost_strip().expect("a grid with a ghost strip") as u32;
+        let ghosts = self.strips.last_mut().expect("a ghost strip");
+        ghosts.clear();
+        ghosts.extend(indices.map(|idx| Entry {
+            x: particles.x[idx],
+            y: particles.y[idx],
+            radius: particles.radius[idx],
+            idx: idx as u32,
+            strip,
+        }));
+    }
+
+    /// Points the entry of the disk stored at `from` (at height `y`) to storage index `to`,
+    /// after the caller moved the disk there.
+    pub fn relabel(&mut self, y: f64, from: u32, to: u32) {
+        let strip = &mut self.strips[self.layout.strip_of(y) - self.first];
+        let entry = strip
+            .iter_mut()
+            .find(|entry| entry.idx == from)
+            .expect("every owned disk has an entry in the strip of its height");
+        entry.idx = to;
+    }
+
+    /// Re-sorts the disks of the whole grid by strip and x after they moved. The first
+    /// build (or one for a different set of disks) sorts from scratch.
+    pub fn build(&mut self, particles: &Particles) {
+        if self.len() != particles.len() {
+            self.fill(particles, 0..particles.len());
+            return;
+        }
+        let mut movers = std::mem::take(&mut self.movers);
+        movers.clear();
+        let owned = self.owned();
+        let layout = self.layout;
+        let strips = &mut self.strips[..self.n_owned];
+        refresh_band(&layout, strips, owned.start, particles, &mut movers);
+        receive_band(strips, owned.start, &[&movers]);
+        self.movers = movers;
+    }
+
+    /// The owned strips, for bands of threads: split them, [`refresh_band`] each, then
+    /// [`receive_band`] each with every band's movers.
+    pub fn owned_strips_mut(&mut self) -> &mut [Vec<Entry>] {
+        &mut self.strips[..self.n_owned]
+    }
+
+    /// Balanced bands of owned strips (global indices, in order, none empty) for up to
+    /// `n_bands` workers: cut where the running disk count passes each equal share.
+    pub fn bands(&self, n_bands: usize) -> Vec<Range<usize>> {
+        let total = self.len().max(1);
+        let mut bands = Vec::with_capacity(n_bands);
+        let mut start = 0;
+        let mut count = 0;
+        for (local, strip) in self.strips[..self.n_owned].iter().enumerate() {
+            count += strip.len();
+            let share = total * (bands.len() + 1) / n_bands;
+            let is_last = local + 1 == self.n_owned;
+            if is_last || (count >= share && bands.len() + 1 < n_bands) {
+                bands.push(self.first + start..self.first + local + 1);
+                start = local + 1;
+            }
+        }
+        bands
+    }
+
+    /// Appends every overlapping pair found by the owned strips (in no particular order).
     /// Call [`StripGrid::build`] first with the same particles.
     pub fn find_contacts(
         &self,
@@ -153,20 +301,33 @@ impl StripGrid {
         domain: &Domain,
         contacts: &mut Vec<Contact>,
     ) {
+        self.find_contacts_in(self.owned(), particles, domain, contacts);
+    }
+
+    /// Appends the overlapping pairs whose scanning disk lies in `strips` (owned, global
+    /// indices): each pair is found by exactly one strip.
+    pub fn find_contacts_in(
+        &self,
+        strips: Range<usize>,
+        particles: &Particles,
+        domain: &Domain,
+        contacts: &mut Vec<Contact>,
+    ) {
+        let local = strips.start - self.first..strips.end - self.first;
         match domain.boundary {
-            Boundary::Walls => self.scan::<false>(particles, domain, contacts),
-            Boundary::Periodic => self.scan::<true>(particles, domain, contacts),
+            Boundary::Walls => self.scan::<false>(local, particles, domain, contacts),
+            Boundary::Periodic => self.scan::<true>(local, particles, domain, contacts),
         }
     }
 
     fn scan<const PERIODIC: bool>(
         &self,
+        local: Range<usize>,
         particles: &Particles,
         domain: &Domain,
         contacts: &mut Vec<Contact>,
     ) {
-        let entries = &self.entries[..];
-        let (reach, width) = (self.reach, self.width);
+        let (reach, width) = (self.layout.reach, self.layout.width);
         let test = |a: &Entry, b: &Entry, contacts: &mut Vec<Contact>| {
             let (dx, dy) = domain.separation_in::<PERIODIC>(a.x, a.y, b.x, b.y);
             let contact = a.radius + b.radius;
@@ -174,20 +335,16 @@ impl StripGrid {
                 contacts.push(Contact::new(particles, a.idx as usize, b.idx as usize));
             }
         };
-        for strip in 0..self.n_strips {
-            let own = self.strip_start[strip] as usize..self.strip_start[strip + 1] as usize;
-            let north_strip = if strip + 1 < self.n_strips {
-                Some(strip + 1)
-            } else if PERIODIC {
-                Some(0)
+        let no_entries: &[Entry] = &[];
+        for strip in local {
+            let own_entries = &self.strips[strip][..];
+            let north_entries = if strip + 1 < self.strips.len() {
+                &self.strips[strip + 1][..]
+            } else if self.north_wraps {
+                &self.strips[0][..]
             } else {
-                None
+                no_entries
             };
-            let north = north_strip.map_or(0..0, |s| {
-                self.strip_start[s] as usize..self.strip_start[s + 1] as usize
-            });
-            let own_entries = &entries[own.clone()];
-            let north_entries = &entries[north];
             // First north disk not left of the current window; the window only moves right.
             let mut north_first = 0;
             for (pos, a) in own_entries.iter().enumerate() {
@@ -241,15 +398,78 @@ impl StripGrid {
     }
 }
 
-/// Sorts nearly sorted entries in O(n + inversions).
+/// First phase of a build, for one band of strips (`band[0]` is the strip with global
+/// index `first`): reads the disks' new positions, moves the disks that changed strip
+/// out to `movers` (then sorted by strip and x), and re-sorts the rest of each strip.
+pub fn refresh_band(
+    layout: &StripLayout,
+    band: &mut [Vec<Entry>],
+    first: usize,
+    particles: &Particles,
+    movers: &mut Vec<Entry>,
+) {
+    let (x, y) = (&particles.x[..], &particles.y[..]);
+    for (offset, strip) in band.iter_mut().enumerate() {
+        let here = (first + offset) as u32;
+        let mut kept = 0;
+        for read in 0..strip.len() {
+            let mut entry = strip[read];
+            let idx = entry.idx as usize;
+            entry.x = x[idx];
+            entry.y = y[idx];
+            entry.strip = layout.strip_of(entry.y) as u32;
+            if entry.strip == here {
+                strip[kept] = entry;
+                kept += 1;
+            } else {
+                movers.push(entry);
+            }
+        }
+        strip.truncate(kept);
+        insertion_sort(strip);
+    }
+    movers.sort_unstable_by(|a, b| a.strip.cmp(&b.strip).then(a.x.total_cmp(&b.x)));
+}
+
+/// Second phase of a build, for one band of strips (`band[0]` has global index
+/// `first`): merges in the movers of every band (each list sorted by strip and x) that
+/// now belong to this band's strips.
+pub fn receive_band(band: &mut [Vec<Entry>], first: usize, movers: &[&[Entry]]) {
+    let end = first + band.len();
+    for list in movers {
+        let from = list.partition_point(|m| m.strip() < first);
+        let to = list.partition_point(|m| m.strip() < end);
+        for group in list[from..to].chunk_by(|a, b| a.strip == b.strip) {
+            merge_sorted(&mut band[group[0].strip() - first], group);
+        }
+    }
+}
+
+/// Merges `incoming` (sorted by x) into `strip` (sorted by x), from the back.
+fn merge_sorted(strip: &mut Vec<Entry>, incoming: &[Entry]) {
+    let mut read = strip.len();
+    strip.resize(read + incoming.len(), Entry::default());
+    let mut write = strip.len();
+    for new in incoming.iter().rev() {
+        while read > 0 && new.x < strip[read - 1].x {
+            read -= 1;
+            write -= 1;
+            strip[write] = strip[read];
+        }
+        write -= 1;
+        strip[write] = *new;
+    }
+}
+
+/// Sorts the nearly sorted entries of one strip by x in O(n + inversions).
 fn insertion_sort(entries: &mut [Entry]) {
     for i in 1..entries.len() {
-        if !entries[i].before(&entries[i - 1]) {
+        if entries[i].x >= entries[i - 1].x {
             continue;
         }
         let moving = entries[i];
         let mut j = i;
-        while j > 0 && moving.before(&entries[j - 1]) {
+        while j > 0 && moving.x < entries[j - 1].x {
             entries[j] = entries[j - 1];
             j -= 1;
         }
