@@ -1,8 +1,9 @@
 //! Command-line arguments (clap derive): raw values only, validated elsewhere.
 
+use std::num::NonZeroUsize;
 use std::path::PathBuf;
 
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use crate::scene_file::{DtValue, Overrides};
 use crate::sim::Broadphase;
@@ -52,6 +53,22 @@ pub struct SimulateArgs {
     /// Broad phase: grid (default) or allpairs (the seed's O(N²) search).
     #[arg(long, value_parser = parse_broadphase)]
     pub broadphase: Option<Broadphase>,
+    /// How to run the steps: serial (the reference), rayon (threads) or mpi (ranks).
+    #[arg(long, value_enum, default_value_t = BackendName::Serial)]
+    pub backend: BackendName,
+    /// Threads of the rayon pool (with --backend rayon; default: the logical cores).
+    #[arg(long, value_parser = parse_workers)]
+    pub threads: Option<NonZeroUsize>,
+    /// MPI ranks to launch (with --backend mpi; default under mpirun: its world size).
+    #[arg(long, value_parser = parse_workers)]
+    pub ranks: Option<NonZeroUsize>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BackendName {
+    Serial,
+    Rayon,
+    Mpi,
 }
 
 impl SimulateArgs {
@@ -74,6 +91,11 @@ fn parse_dt(text: &str) -> Result<DtValue, String> {
     text.parse::<f64>()
         .map(DtValue::Seconds)
         .map_err(|_| format!("expected a number or \"auto\", got \"{text}\""))
+}
+
+fn parse_workers(text: &str) -> Result<NonZeroUsize, String> {
+    text.parse::<NonZeroUsize>()
+        .map_err(|_| format!("expected a whole number of at least 1, got \"{text}\""))
 }
 
 fn parse_broadphase(text: &str) -> Result<Broadphase, String> {

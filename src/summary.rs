@@ -19,6 +19,12 @@ pub struct RunSummary {
     pub backend: String,
     /// Workers used: threads × ranks (1 for serial).
     pub workers: usize,
+    /// Threads per process (rayon pool size; 1 for serial and MPI).
+    pub threads: usize,
+    /// MPI processes (1 for serial and rayon).
+    pub ranks: usize,
+    /// True when threads × ranks exceeds this machine's logical cores.
+    pub oversubscribed: bool,
     pub boundary: String,
     pub broadphase: String,
     /// Area fraction covered by disks.
@@ -33,6 +39,14 @@ pub struct RunSummary {
     pub fps: f64,
     /// n × steps / wall_s.
     pub particle_steps_per_s: f64,
+    /// Seconds of `wall_s` moving disks and applying the boundary.
+    pub integration_s: f64,
+    /// Seconds of `wall_s` building the grid and finding and ordering overlapping pairs.
+    pub broad_phase_s: f64,
+    /// Seconds of `wall_s` applying the impulse law.
+    pub collision_s: f64,
+    /// Seconds of `wall_s` exchanging data between MPI ranks (0 without MPI).
+    pub communication_s: f64,
     pub kinetic_energy_initial: f64,
     pub kinetic_energy_final: f64,
     /// Total momentum [px, py] before the first step.
@@ -59,15 +73,30 @@ impl fmt::Display for RunSummary {
             "{} disks, {} boundary, packing {:.4}, {seed}",
             self.n, self.boundary, self.packing
         )?;
+        let oversubscribed = if self.oversubscribed {
+            " (oversubscribed: more workers than cores)"
+        } else {
+            ""
+        };
         writeln!(
             f,
-            "{} steps of dt = {:.6e}{dt_rule}, {} backend, {} worker(s), {} broad phase",
-            self.steps, self.dt, self.backend, self.workers, self.broadphase
+            "{} steps of dt = {:.6e}{dt_rule}, {} broad phase",
+            self.steps, self.dt, self.broadphase
+        )?;
+        writeln!(
+            f,
+            "backend    {}, {} thread(s) × {} rank(s){oversubscribed}",
+            self.backend, self.threads, self.ranks
         )?;
         writeln!(
             f,
             "time       {:.4} s stepping ({:.1} steps/s, {:.3e} particle-steps/s), {:.4} s setup",
             self.wall_s, self.fps, self.particle_steps_per_s, self.setup_s
+        )?;
+        writeln!(
+            f,
+            "stages     {:.4} s integration, {:.4} s broad phase, {:.4} s collisions, {:.4} s communication",
+            self.integration_s, self.broad_phase_s, self.collision_s, self.communication_s
         )?;
         let relative_change = (self.kinetic_energy_final - self.kinetic_energy_initial)
             / self.kinetic_energy_initial.abs().max(f64::MIN_POSITIVE);

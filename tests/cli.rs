@@ -51,10 +51,17 @@ fn json_is_one_object_on_the_last_line_with_the_stable_fields() {
         "dt",
         "backend",
         "workers",
+        "threads",
+        "ranks",
+        "oversubscribed",
         "wall_s",
         "setup_s",
         "fps",
         "particle_steps_per_s",
+        "integration_s",
+        "broad_phase_s",
+        "collision_s",
+        "communication_s",
         "kinetic_energy_initial",
         "kinetic_energy_final",
         "momentum_initial",
@@ -239,6 +246,65 @@ fn bad_overrides_and_missing_files_are_rejected() {
         &["simulate", "no/such/scene.toml"],
         &["no/such/scene.toml", "check the path"],
     );
+}
+
+#[test]
+fn bad_worker_counts_are_rejected_with_the_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = scene_file(dir.path(), "gas.toml", GAS);
+    let path = path.to_str().unwrap();
+    for flag in ["--threads", "--ranks"] {
+        assert_rejected(&["simulate", path, flag, "0"], &[flag, "at least 1"]);
+    }
+    assert_rejected(
+        &["simulate", path, "--threads", "2"],
+        &["--threads", "--backend rayon"],
+    );
+    assert_rejected(
+        &["simulate", path, "--backend", "rayon", "--ranks", "2"],
+        &["--ranks", "--backend mpi"],
+    );
+}
+
+#[cfg(not(feature = "mpi"))]
+#[test]
+fn mpi_without_the_feature_says_how_to_build_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = scene_file(dir.path(), "gas.toml", GAS);
+    assert_rejected(
+        &["simulate", path.to_str().unwrap(), "--backend", "mpi"],
+        &["without MPI support", "--features mpi", "libopenmpi-dev"],
+    );
+}
+
+#[test]
+fn rayon_prints_the_serial_hash_and_its_worker_counts() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = scene_file(dir.path(), "gas.toml", GAS);
+    let path = path.to_str().unwrap();
+    let summary = |extra: &[&str]| {
+        let out = collide(&[&["simulate", path, "--json"], extra].concat());
+        assert!(out.status.success());
+        let stdout = String::from_utf8(out.stdout).unwrap();
+        serde_json::from_str::<serde_json::Value>(stdout.lines().last().unwrap()).unwrap()
+    };
+    let serial = summary(&[]);
+    let rayon = summary(&["--backend", "rayon", "--threads", "3"]);
+    assert_eq!(rayon["state_hash"], serial["state_hash"]);
+    assert_eq!(rayon["backend"], "rayon");
+    assert_eq!(
+        (rayon["threads"].as_u64(), rayon["ranks"].as_u64()),
+        (Some(3), Some(1))
+    );
+    for stage in [
+        "integration_s",
+        "broad_phase_s",
+        "collision_s",
+        "communication_s",
+    ] {
+        assert!(rayon[stage].as_f64().unwrap() >= 0.0, "{stage}");
+    }
+    assert!(rayon["oversubscribed"].is_boolean());
 }
 
 #[test]

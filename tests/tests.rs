@@ -1,4 +1,5 @@
 //! All integration tests, built into one test binary.
 
+mod backends;
 mod cli;
 mod physics;

@@ -1,15 +1,136 @@
 //! Backends: drivers that run a prepared scene with the pure core and time it.
 //!
-//! The serial backend is the reference every other backend is tested against.
+//! The serial backend is the reference; the threaded (rayon) and distributed (MPI)
+//! backends must reproduce its `state_hash` bit for bit.
 
 pub mod serial;
+pub mod threads;
 
-use crate::sim::Particles;
+use std::num::NonZeroUsize;
+use std::time::Instant;
+
+use crate::sim::observe::{Observables, observe, state_hash};
+use crate::sim::scene::PlacementError;
+use crate::sim::{Particles, StepCounters};
+use crate::spec::PreparedRun;
 use crate::summary::RunSummary;
+
+/// Which backend runs the steps, with its worker count.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BackendSpec {
+    Serial,
+    /// A rayon pool of exactly this many threads, built for the run.
+    Rayon {
+        threads: NonZeroUsize,
+    },
+    /// MPI ranks: launched by collide itself (`Some`), or taken from the MPI world when
+    /// collide already runs under `mpirun` (`None`).
+    Mpi {
+        ranks: Option<NonZeroUsize>,
+    },
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum BackendError {
+    #[error(transparent)]
+    Placement(#[from] PlacementError),
+    #[error("cannot start a pool of {threads} threads: {source}")]
+    ThreadPool {
+        threads: usize,
+        source: rayon::ThreadPoolBuildError,
+    },
+    #[error("{0}")]
+    Mpi(String),
+}
 
 /// What a run leaves behind: its summary and the final state (for `--dump`).
 #[derive(Clone, Debug)]
 pub struct RunOutcome {
     pub summary: RunSummary,
     pub final_state: Particles,
+}
+
+/// Seconds spent in each stage of the stepping loop, summed over the steps.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StageSeconds {
+    /// Moving the disks and applying the boundary.
+    pub integration: f64,
+    /// Building the grid and finding (and ordering) the overlapping pairs.
+    pub broad_phase: f64,
+    /// Applying the impulse law to the pairs.
+    pub collisions: f64,
+    /// Exchanging disks and results between ranks (MPI only).
+    pub communication: f64,
+}
+
+/// Runs `work` and adds its wall time to `seconds`.
+#[inline]
+pub fn timed<T>(seconds: &mut f64, work: impl FnOnce() -> T) -> T {
+    let start = Instant::now();
+    let result = work();
+    *seconds += start.elapsed().as_secs_f64();
+    result
+}
+
+/// Where a run's workers went: the backend's name and its threads and ranks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Workers {
+    pub backend: &'static str,
+    pub threads: usize,
+    pub ranks: usize,
+}
+
+/// What the stepping loop measured, for [`summarize`].
+#[derive(Clone, Copy, Debug)]
+pub struct Measured {
+    pub setup_s: f64,
+    pub wall_s: f64,
+    pub stages: StageSeconds,
+    pub counters: StepCounters,
+    pub initial: Observables,
+}
+
+/// The summary of a finished run; `last` is the whole final state in any storage order.
+pub fn summarize(
+    prepared: &PreparedRun,
+    workers: Workers,
+    measured: &Measured,
+    last: &Particles,
+) -> RunSummary {
+    let n = last.len();
+    let steps = prepared.steps;
+    let wall_s = measured.wall_s;
+    let final_observables = observe(last);
+    let cores = std::thread::available_parallelism().map_or(1, NonZeroUsize::get);
+    RunSummary {
+        n,
+        steps,
+        dt: prepared.params.dt,
+        dt_auto_fraction: prepared.dt_auto_fraction,
+        backend: workers.backend.to_owned(),
+        workers: workers.threads * workers.ranks,
+        threads: workers.threads,
+        ranks: workers.ranks,
+        oversubscribed: workers.threads * workers.ranks > cores,
+        boundary: prepared.scene.domain.boundary.name().to_owned(),
+        broadphase: prepared.params.broadphase.name().to_owned(),
+        packing: prepared.scene.packing(),
+        seed: prepared.seed,
+        wall_s,
+        setup_s: measured.setup_s,
+        fps: steps as f64 / wall_s,
+        particle_steps_per_s: (n as f64 * steps as f64) / wall_s,
+        integration_s: measured.stages.integration,
+        broad_phase_s: measured.stages.broad_phase,
+        collision_s: measured.stages.collisions,
+        communication_s: measured.stages.communication,
+        kinetic_energy_initial: measured.initial.kinetic_energy,
+        kinetic_energy_final: final_observables.kinetic_energy,
+        momentum_initial: measured.initial.momentum,
+        momentum_final: final_observables.momentum,
+        pair_collisions: measured.counters.pair_collisions,
+        wall_collisions: measured.counters.wall_collisions,
+        max_overlap: measured.counters.max_overlap,
+        state_hash: state_hash(last),
+    }
 }

@@ -2,15 +2,13 @@
 
 use std::time::Instant;
 
-use crate::backend::RunOutcome;
+use crate::backend::{BackendError, Measured, RunOutcome, StageSeconds, Workers, summarize, timed};
 use crate::sim::Stepper;
-use crate::sim::observe::{observe, state_hash};
-use crate::sim::scene::PlacementError;
+use crate::sim::observe::observe;
 use crate::spec::RunSpec;
-use crate::summary::RunSummary;
 
-/// Builds the scene, steps it `steps` times on one thread, and measures the run.
-pub fn run(spec: &RunSpec) -> Result<RunOutcome, PlacementError> {
+/// Builds the scene, steps it on one thread, and measures the run stage by stage.
+pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
     let setup_start = Instant::now();
     let prepared = spec.prepare()?;
     let mut particles = prepared.scene.particles.clone();
@@ -18,39 +16,32 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, PlacementError> {
     let setup_s = setup_start.elapsed().as_secs_f64();
     let initial = observe(&particles);
 
+    let mut stages = StageSeconds::default();
     let loop_start = Instant::now();
     for _ in 0..prepared.steps {
-        stepper.step(&mut particles);
+        timed(&mut stages.integration, || stepper.advance(&mut particles));
+        timed(&mut stages.broad_phase, || {
+            stepper.find_contacts(&mut particles)
+        });
+        timed(&mut stages.collisions, || {
+            stepper.resolve_contacts(&mut particles)
+        });
     }
     let wall_s = loop_start.elapsed().as_secs_f64();
 
-    let last = observe(&particles);
-    let counters = stepper.counters();
-    let n = particles.len();
-    let summary = RunSummary {
-        n,
-        steps: prepared.steps,
-        dt: prepared.params.dt,
-        dt_auto_fraction: prepared.dt_auto_fraction,
-        backend: "serial".to_owned(),
-        workers: 1,
-        boundary: prepared.scene.domain.boundary.name().to_owned(),
-        broadphase: prepared.params.broadphase.name().to_owned(),
-        packing: prepared.scene.packing(),
-        seed: prepared.seed,
-        wall_s,
+    let measured = Measured {
         setup_s,
-        fps: prepared.steps as f64 / wall_s,
-        particle_steps_per_s: (n as f64 * prepared.steps as f64) / wall_s,
-        kinetic_energy_initial: initial.kinetic_energy,
-        kinetic_energy_final: last.kinetic_energy,
-        momentum_initial: initial.momentum,
-        momentum_final: last.momentum,
-        pair_collisions: counters.pair_collisions,
-        wall_collisions: counters.wall_collisions,
-        max_overlap: counters.max_overlap,
-        state_hash: state_hash(&particles),
+        wall_s,
+        stages,
+        counters: stepper.counters(),
+        initial,
     };
+    let workers = Workers {
+        backend: "serial",
+        threads: 1,
+        ranks: 1,
+    };
+    let summary = summarize(&prepared, workers, &measured, &particles);
     Ok(RunOutcome {
         summary,
         final_state: particles,

@@ -187,9 +187,10 @@ impl StripGrid {
     /// Tells the grid that the caller stored the disks in [`StripGrid::sorted_indices`]
     /// order, so slot and storage index now coincide.
     pub fn storage_now_sorted(&mut self) {
-        let entries = self.strips[..self.n_owned].iter_mut().flatten();
-        for (slot, entry) in entries.enumerate() {
-            entry.idx = slot as u32;
+        let mut first_slot = 0;
+        for strip in &mut self.strips[..self.n_owned] {
+            number_slots(strip, first_slot);
+            first_slot += strip.len();
         }
     }
 
@@ -445,6 +446,14 @@ pub fn receive_band(band: &mut [Vec<Entry>], first: usize, movers: &[&[Entry]]) 
     }
 }
 
+/// Points the entries of one strip to consecutive storage slots from `first_slot`: the
+/// strip's part of [`StripGrid::storage_now_sorted`].
+pub fn number_slots(strip: &mut [Entry], first_slot: usize) {
+    for (offset, entry) in strip.iter_mut().enumerate() {
+        entry.idx = (first_slot + offset) as u32;
+    }
+}
+
 /// Merges `incoming` (sorted by x) into `strip` (sorted by x), from the back.
 fn merge_sorted(strip: &mut Vec<Entry>, incoming: &[Entry]) {
     let mut read = strip.len();
@@ -483,19 +492,31 @@ pub fn find_contacts_all_pairs(
     domain: &Domain,
     contacts: &mut Vec<Contact>,
 ) {
+    find_contacts_all_pairs_from(0..particles.len(), particles, domain, contacts);
+}
+
+/// The pairs of [`find_contacts_all_pairs`] whose first disk (in storage order) is in
+/// `rows`: disjoint row ranges split the search among workers.
+pub fn find_contacts_all_pairs_from(
+    rows: Range<usize>,
+    particles: &Particles,
+    domain: &Domain,
+    contacts: &mut Vec<Contact>,
+) {
     match domain.boundary {
-        Boundary::Walls => all_pairs::<false>(particles, domain, contacts),
-        Boundary::Periodic => all_pairs::<true>(particles, domain, contacts),
+        Boundary::Walls => all_pairs::<false>(rows, particles, domain, contacts),
+        Boundary::Periodic => all_pairs::<true>(rows, particles, domain, contacts),
     }
 }
 
 fn all_pairs<const PERIODIC: bool>(
+    rows: Range<usize>,
     particles: &Particles,
     domain: &Domain,
     contacts: &mut Vec<Contact>,
 ) {
     let (x, y, radius) = (&particles.x, &particles.y, &particles.radius);
-    for i in 0..particles.len() {
+    for i in rows {
         for j in i + 1..particles.len() {
             let (dx, dy) = domain.separation_in::<PERIODIC>(x[i], y[i], x[j], y[j]);
             let contact = radius[i] + radius[j];

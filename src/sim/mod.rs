@@ -7,8 +7,9 @@ pub mod grid;
 pub mod observe;
 pub mod particles;
 pub mod scene;
+pub mod schedule;
 pub mod step;
 
-pub use particles::{Disk, Particles};
+pub use particles::{Disk, DiskSlices, Particles};
 pub use scene::{Boundary, Domain, Physics, Scene};
 pub use step::{Broadphase, StepCounters, StepParams, Stepper};

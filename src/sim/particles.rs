@@ -19,6 +19,17 @@ pub struct Particles {
     pub mass: Vec<f64>,
 }
 
+/// What the per-disk half of a step changes and reads: positions and velocities
+/// (mutable) and radii, as equal-length slices of a run of disks.
+#[derive(Debug)]
+pub struct DiskSlices<'a> {
+    pub x: &'a mut [f64],
+    pub y: &'a mut [f64],
+    pub vx: &'a mut [f64],
+    pub vy: &'a mut [f64],
+    pub radius: &'a [f64],
+}
+
 /// One disk, used to build and inspect [`Particles`] (not on hot paths).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Disk {
@@ -63,6 +74,17 @@ impl Particles {
         self.mass.push(disk.mass);
     }
 
+    /// All disks as [`DiskSlices`].
+    pub fn disk_slices_mut(&mut self) -> DiskSlices<'_> {
+        DiskSlices {
+            x: &mut self.x,
+            y: &mut self.y,
+            vx: &mut self.vx,
+            vy: &mut self.vy,
+            radius: &self.radius,
+        }
+    }
+
     pub fn len(&self) -> usize {
         self.id.len()
     }
@@ -102,17 +124,31 @@ impl Particles {
 
     /// Stores the disks in a new order: `new_order` lists old storage indices, each once.
     pub fn reorder(&mut self, new_order: &[u32]) {
-        fn gather<T: Copy>(values: &mut Vec<T>, order: &[u32]) {
-            *values = order.iter().map(|&idx| values[idx as usize]).collect();
-        }
         debug_assert_eq!(new_order.len(), self.len());
-        gather(&mut self.id, new_order);
-        gather(&mut self.x, new_order);
-        gather(&mut self.y, new_order);
-        gather(&mut self.vx, new_order);
-        gather(&mut self.vy, new_order);
-        gather(&mut self.radius, new_order);
-        gather(&mut self.mass, new_order);
+        self.replace_arrays(
+            |values| new_order.iter().map(|&idx| values[idx as usize]).collect(),
+            |ids| new_order.iter().map(|&idx| ids[idx as usize]).collect(),
+        );
+    }
+
+    /// Replaces every array with what `floats` (for the f64 arrays) or `ids` makes of it:
+    /// the one place that lists the arrays, for operations that treat them all alike.
+    pub fn replace_arrays(
+        &mut self,
+        mut floats: impl FnMut(&[f64]) -> Vec<f64>,
+        ids: impl FnOnce(&[u32]) -> Vec<u32>,
+    ) {
+        self.id = ids(&self.id);
+        for values in [
+            &mut self.x,
+            &mut self.y,
+            &mut self.vx,
+            &mut self.vy,
+            &mut self.radius,
+            &mut self.mass,
+        ] {
+            *values = floats(values);
+        }
     }
 
     /// Largest radius, 0 for an empty set.

@@ -301,7 +301,7 @@ impl GasSpec {
             })
             .collect();
         let velocities = maxwellian_velocities(&masses, self.speed_rms, &mut rng);
-        let disks: Vec<Disk> = (0..self.n_particles)
+        let mut disks: Vec<Disk> = (0..self.n_particles)
             .map(|i| Disk {
                 x: positions[i].0,
                 y: positions[i].1,
@@ -311,6 +311,14 @@ impl GasSpec {
                 mass: masses[i],
             })
             .collect();
+        // Ids in row order (rows one contact diameter tall, then x): canonical pair order
+        // goes by id, so numbering neighbours close together keeps every pass over the
+        // contacts close in memory. Placement order is random in space.
+        let row_height = 2.0 * max_radius;
+        disks.sort_by(|a, b| {
+            let (row_a, row_b) = ((a.y / row_height).floor(), (b.y / row_height).floor());
+            row_a.total_cmp(&row_b).then(a.x.total_cmp(&b.x))
+        });
         Ok(Scene {
             domain,
             physics: self.physics,

@@ -8,13 +8,17 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::collision::resolve_contact;
+use super::collision::{ContactOutcome, resolve_contact};
 use super::grid::{Contact, StripGrid, find_contacts_all_pairs};
-use super::particles::Particles;
+use super::particles::{DiskSlices, Particles};
 use super::scene::{Boundary, Domain, Physics, Scene, wrap_periodic};
 
 /// Grid builds between re-storings of the disks in grid order.
-const REORDER_INTERVAL: u32 = 16;
+pub const REORDER_INTERVAL: u32 = 16;
+
+/// Where the count of builds starts: the first build (a sort from scratch) re-stores the
+/// disks too, since a new scene is stored in placement order, which is random in space.
+pub const FIRST_BUILDS_SINCE_REORDER: u32 = REORDER_INTERVAL - 1;
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -79,7 +83,7 @@ impl Stepper {
             physics,
             params,
             grid: StripGrid::new(&domain, particles.max_radius(), particles.len()),
-            builds_since_reorder: 0,
+            builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
             contacts: Vec::new(),
             counters: StepCounters::default(),
         }
@@ -96,58 +100,20 @@ impl Stepper {
 
     /// One full step: move, apply the boundary, find overlaps, resolve them.
     pub fn step(&mut self, particles: &mut Particles) {
-        self.integrate(particles);
-        self.apply_boundary(particles);
+        self.advance(particles);
         self.find_contacts(particles);
         self.resolve_contacts(particles);
     }
 
-    /// Moves every disk by one dt: the seed's equations 8–9 (x += v·dt) without a field,
-    /// velocity Verlet (equations 6–7) with a constant one.
-    pub fn integrate(&mut self, particles: &mut Particles) {
-        let dt = self.params.dt;
-        match self.physics.gravity {
-            None => {
-                drift(&mut particles.x, &particles.vx, dt);
-                drift(&mut particles.y, &particles.vy, dt);
-            }
-            Some([gx, gy]) => {
-                accelerate(&mut particles.x, &mut particles.vx, gx, dt);
-                accelerate(&mut particles.y, &mut particles.vy, gy, dt);
-            }
-        }
-    }
-
-    /// Reflects disks that touch a wall while moving outward, or wraps periodic ones.
-    pub fn apply_boundary(&mut self, particles: &mut Particles) {
-        let Domain {
-            width,
-            height,
-            boundary,
-        } = self.domain;
-        match boundary {
-            Boundary::Periodic => {
-                for x in &mut particles.x {
-                    *x = wrap_periodic(*x, width);
-                }
-                for y in &mut particles.y {
-                    *y = wrap_periodic(*y, height);
-                }
-            }
-            Boundary::Walls => {
-                let e = self.physics.wall_restitution;
-                let hits =
-                    reflect_at_walls(&particles.x, &mut particles.vx, &particles.radius, width, e)
-                        + reflect_at_walls(
-                            &particles.y,
-                            &mut particles.vy,
-                            &particles.radius,
-                            height,
-                            e,
-                        );
-                self.counters.wall_collisions += hits;
-            }
-        }
+    /// Moves every disk by one dt and applies the boundary ([`advance_disks`]).
+    pub fn advance(&mut self, particles: &mut Particles) {
+        let hits = advance_disks(
+            &self.domain,
+            &self.physics,
+            self.params.dt,
+            particles.disk_slices_mut(),
+        );
+        self.counters.wall_collisions += hits;
     }
 
     /// Finds every overlapping pair and puts them in canonical order. May change the
@@ -179,16 +145,89 @@ impl Stepper {
     /// Applies the impulse law to each found pair, in canonical order.
     pub fn resolve_contacts(&mut self, particles: &mut Particles) {
         let e = self.physics.restitution;
-        for contact in &self.contacts {
-            let outcome = resolve_contact(
-                particles,
-                &self.domain,
-                e,
-                contact.a as usize,
-                contact.b as usize,
-            );
-            self.counters.pair_collisions += u64::from(outcome.collided);
-            self.counters.max_overlap = self.counters.max_overlap.max(outcome.overlap_fraction);
+        resolve_in_order(
+            particles,
+            &self.domain,
+            e,
+            &self.contacts,
+            &mut self.counters,
+        );
+    }
+}
+
+/// Resolves `contacts` one after another, in the order given, and counts what happened.
+pub fn resolve_in_order(
+    particles: &mut Particles,
+    domain: &Domain,
+    restitution: f64,
+    contacts: &[Contact],
+    counters: &mut StepCounters,
+) {
+    for contact in contacts {
+        let outcome = resolve_contact(
+            particles,
+            domain,
+            restitution,
+            contact.a as usize,
+            contact.b as usize,
+        );
+        counters.record(outcome);
+    }
+}
+
+impl StepCounters {
+    /// Counts one resolved pair.
+    #[inline(always)]
+    pub fn record(&mut self, outcome: ContactOutcome) {
+        self.pair_collisions += u64::from(outcome.collided);
+        self.max_overlap = self.max_overlap.max(outcome.overlap_fraction);
+    }
+
+    /// Adds the counts of another worker's steps.
+    pub fn merge(&mut self, other: &StepCounters) {
+        self.pair_collisions += other.pair_collisions;
+        self.wall_collisions += other.wall_collisions;
+        self.max_overlap = self.max_overlap.max(other.max_overlap);
+    }
+}
+
+/// The per-disk half of a step for any chunk of disks: move them by one dt (the
+/// seed's equations 8–9, x += v·dt, without a field; velocity Verlet, equations 6–7,
+/// with a constant one), then reflect those that touch a wall while moving outward, or
+/// wrap periodic ones. No disk's update reads another's, so chunks can go in any order
+/// or in parallel. Returns the wall reflections.
+pub fn advance_disks(domain: &Domain, physics: &Physics, dt: f64, disks: DiskSlices<'_>) -> u64 {
+    let DiskSlices {
+        x,
+        y,
+        vx,
+        vy,
+        radius,
+    } = disks;
+    match physics.gravity {
+        None => {
+            drift(x, vx, dt);
+            drift(y, vy, dt);
+        }
+        Some([gx, gy]) => {
+            accelerate(x, vx, gx, dt);
+            accelerate(y, vy, gy, dt);
+        }
+    }
+    match domain.boundary {
+        Boundary::Periodic => {
+            for x in x.iter_mut() {
+                *x = wrap_periodic(*x, domain.width);
+            }
+            for y in y.iter_mut() {
+                *y = wrap_periodic(*y, domain.height);
+            }
+            0
+        }
+        Boundary::Walls => {
+            let e = physics.wall_restitution;
+            reflect_at_walls(x, vx, radius, domain.width, e)
+                + reflect_at_walls(y, vy, radius, domain.height, e)
         }
     }
 }

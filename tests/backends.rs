@@ -1,0 +1,105 @@
+//! Every backend gives the serial reference's bits: same scene, same `state_hash`.
+
+use std::num::NonZeroUsize;
+
+use collide::backend::{serial, threads};
+use collide::sim::scene::{Extent, GasSpec, MassRule, Placement, RadiusDistribution};
+use collide::sim::{Boundary, Broadphase, Physics};
+use collide::spec::{DtChoice, MethodSpec, RunSpec, SceneSource};
+
+/// Dilute and dense, walls and periodic, elastic and inelastic: the cases the issue names.
+fn scenes() -> Vec<(String, RunSpec)> {
+    let mut scenes = Vec::new();
+    for boundary in [Boundary::Walls, Boundary::Periodic] {
+        for restitution in [1.0, 0.8] {
+            for packing in [0.05, 0.35] {
+                let gas = GasSpec {
+                    n_particles: 3000,
+                    extent: Extent::Packing(packing),
+                    radius: RadiusDistribution::Uniform { min: 0.6, max: 1.4 },
+                    mass: MassRule::Area,
+                    speed_rms: 1.0,
+                    placement: Placement::Random,
+                    boundary,
+                    physics: Physics {
+                        restitution,
+                        wall_restitution: restitution,
+                        gravity: None,
+                    },
+                    seed: 99,
+                };
+                let name = format!("{} e={restitution} packing={packing}", boundary.name());
+                scenes.push((name, run_spec(gas, Broadphase::Grid)));
+            }
+        }
+    }
+    scenes
+}
+
+fn run_spec(gas: GasSpec, broadphase: Broadphase) -> RunSpec {
+    RunSpec {
+        scene: SceneSource::Gas(gas),
+        method: MethodSpec {
+            dt: DtChoice::Fixed(0.05),
+            steps: 300,
+            broadphase,
+        },
+    }
+}
+
+fn threads(n: usize) -> NonZeroUsize {
+    NonZeroUsize::new(n).unwrap()
+}
+
+#[test]
+fn rayon_at_1_2_3_4_and_8_threads_gives_the_serial_hash() {
+    for (name, spec) in scenes() {
+        let reference = serial::run(&spec).unwrap().summary;
+        assert!(
+            reference.pair_collisions > 100,
+            "{name}: too few collisions to test"
+        );
+        for n in [1, 2, 3, 4, 8] {
+            let summary = threads::run(&spec, threads(n)).unwrap().summary;
+            assert_eq!(
+                summary.state_hash, reference.state_hash,
+                "{name}, {n} threads"
+            );
+            assert_eq!(summary.pair_collisions, reference.pair_collisions, "{name}");
+            assert_eq!(summary.wall_collisions, reference.wall_collisions, "{name}");
+            assert_eq!(summary.max_overlap, reference.max_overlap, "{name}");
+            assert_eq!((summary.threads, summary.ranks), (n, 1));
+        }
+    }
+}
+
+#[test]
+fn rayon_all_pairs_and_gravity_give_the_serial_hash() {
+    let mut gas = GasSpec {
+        n_particles: 800,
+        extent: Extent::Packing(0.3),
+        radius: RadiusDistribution::Fixed(1.0),
+        mass: MassRule::Fixed(1.0),
+        speed_rms: 1.0,
+        placement: Placement::Random,
+        boundary: Boundary::Walls,
+        physics: Physics {
+            restitution: 0.9,
+            wall_restitution: 0.9,
+            gravity: Some([0.0, -1.0]),
+        },
+        seed: 5,
+    };
+    for broadphase in [Broadphase::Grid, Broadphase::AllPairs] {
+        let spec = run_spec(gas, broadphase);
+        let reference = serial::run(&spec).unwrap().summary;
+        for n in [2, 3] {
+            let summary = threads::run(&spec, threads(n)).unwrap().summary;
+            assert_eq!(summary.state_hash, reference.state_hash, "{broadphase:?}");
+        }
+    }
+    gas.physics.gravity = None;
+    let grid = serial::run(&run_spec(gas, Broadphase::Grid)).unwrap();
+    let all_pairs = threads::run(&run_spec(gas, Broadphase::AllPairs), threads(2)).unwrap();
+    assert_eq!(grid.summary.state_hash, all_pairs.summary.state_hash);
+}
