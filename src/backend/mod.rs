@@ -3,6 +3,8 @@
 //! The serial backend is the reference; the threaded (rayon) and distributed (MPI)
 //! backends must reproduce its `state_hash` bit for bit.
 
+pub mod comm;
+pub mod distributed;
 pub mod serial;
 pub mod threads;
 

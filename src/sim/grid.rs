@@ -55,6 +55,10 @@ impl Entry {
         self.idx
     }
 
+    pub fn x(&self) -> f64 {
+        self.x
+    }
+
     /// Global index of the strip the disk was in at the last refresh.
     pub fn strip(&self) -> usize {
         self.strip as usize

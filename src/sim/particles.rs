@@ -19,6 +19,9 @@ pub struct Particles {
     pub mass: Vec<f64>,
 }
 
+/// Values per disk in a packed buffer ([`Particles::pack`]).
+pub const PACKED_LEN: usize = 7;
+
 /// What the per-disk half of a step changes and reads: positions and velocities
 /// (mutable) and radii, as equal-length slices of a run of disks.
 #[derive(Debug)]
@@ -131,23 +134,72 @@ impl Particles {
         );
     }
 
-    /// Replaces every array with what `floats` (for the f64 arrays) or `ids` makes of it:
-    /// the one place that lists the arrays, for operations that treat them all alike.
+    /// Replaces every array with what `floats` (for the f64 arrays) or `ids` makes of it.
     pub fn replace_arrays(
         &mut self,
         mut floats: impl FnMut(&[f64]) -> Vec<f64>,
         ids: impl FnOnce(&[u32]) -> Vec<u32>,
     ) {
         self.id = ids(&self.id);
-        for values in [
+        for values in self.float_arrays_mut() {
+            *values = floats(values);
+        }
+    }
+
+    /// The f64 arrays in packing order: x, y, vx, vy, radius, mass. With `id`, the one
+    /// place that lists the arrays, for operations that treat them all alike.
+    fn float_arrays_mut(&mut self) -> [&mut Vec<f64>; 6] {
+        [
             &mut self.x,
             &mut self.y,
             &mut self.vx,
             &mut self.vy,
             &mut self.radius,
             &mut self.mass,
-        ] {
-            *values = floats(values);
+        ]
+    }
+
+    fn float_arrays(&self) -> [&Vec<f64>; 6] {
+        [
+            &self.x,
+            &self.y,
+            &self.vx,
+            &self.vy,
+            &self.radius,
+            &self.mass,
+        ]
+    }
+
+    /// Appends the disk stored at `idx` to `out` as [`PACKED_LEN`] values: id, x, y, vx,
+    /// vy, radius, mass (ids below 2^32 are exact in f64).
+    pub fn pack(&self, idx: usize, out: &mut Vec<f64>) {
+        out.push(f64::from(self.id[idx]));
+        out.extend(self.float_arrays().map(|values| values[idx]));
+    }
+
+    /// Appends the disks packed in `packed` (records of [`Particles::pack`]), keeping ids.
+    pub fn unpack_append(&mut self, packed: &[f64]) {
+        for record in packed.chunks_exact(PACKED_LEN) {
+            self.id.push(record[0] as u32);
+            for (values, &value) in self.float_arrays_mut().into_iter().zip(&record[1..]) {
+                values.push(value);
+            }
+        }
+    }
+
+    /// Removes the disk stored at `idx`, moving the last disk into its slot.
+    pub fn swap_remove(&mut self, idx: usize) {
+        self.id.swap_remove(idx);
+        for values in self.float_arrays_mut() {
+            values.swap_remove(idx);
+        }
+    }
+
+    /// Keeps the first `len` disks in storage order.
+    pub fn truncate(&mut self, len: usize) {
+        self.id.truncate(len);
+        for values in self.float_arrays_mut() {
+            values.truncate(len);
         }
     }
 

@@ -33,17 +33,30 @@ impl ContactSchedule {
         found: &mut [Vec<Contact>],
         crossing: &mut Vec<Contact>,
     ) {
-        crossing.clear();
         if found.len() < 2 {
+            crossing.clear();
             return;
         }
+        self.split_pinned(n_particles, found, crossing, |_| false);
+    }
+
+    /// [`ContactSchedule::split`], where every chain with a `pinned` disk (by storage
+    /// index) also moves to `crossing`: a rank pins the disks other ranks also see.
+    pub fn split_pinned(
+        &mut self,
+        n_particles: usize,
+        found: &mut [Vec<Contact>],
+        crossing: &mut Vec<Contact>,
+        pinned: impl Fn(u32) -> bool,
+    ) {
+        crossing.clear();
         self.parent.resize(n_particles, 0);
         self.finder.resize(n_particles, UNSEEN);
         // Only the disks in contacts are touched: O(contacts), not O(disks).
         for contact in found.iter().flatten() {
             for disk in [contact.a, contact.b] {
                 self.parent[disk as usize] = disk;
-                self.finder[disk as usize] = UNSEEN;
+                self.finder[disk as usize] = if pinned(disk) { SHARED } else { UNSEEN };
             }
         }
         for (band, contacts) in found.iter().enumerate() {
@@ -122,6 +135,15 @@ mod tests {
         assert_eq!(found[0], vec![contact(0, 1), contact(1, 2)]);
         assert_eq!(found[1], vec![contact(3, 4)]);
         assert_eq!(crossing, vec![contact(5, 6), contact(6, 7)]);
+    }
+
+    #[test]
+    fn chains_with_a_pinned_disk_move_and_the_rest_stay() {
+        let mut found = vec![vec![contact(0, 1), contact(2, 3), contact(3, 4)]];
+        let mut crossing = Vec::new();
+        ContactSchedule::default().split_pinned(5, &mut found, &mut crossing, |d| d == 4);
+        assert_eq!(found[0], vec![contact(0, 1)]);
+        assert_eq!(crossing, vec![contact(2, 3), contact(3, 4)]);
     }
 
     #[test]

@@ -1,0 +1,546 @@
+//! The distributed backend, generic over a [`Communicator`]: a domain decomposition
+//! that gives the serial bits for any rank count.
+//!
+//! Each rank owns a slab of whole strips (cut so that the initial disks are shared out
+//! evenly; counts need not divide the box). Per step a rank moves its disks, refreshes
+//! its strips, hands the disks that left its slab to their new owners (migration),
+//! sends the disks of its first strip to the rank below as ghosts (halo), and finds
+//! the pairs its strips scan (its last strip scans the ghosts above it). Chains of
+//! contacts with no ghost and no exported disk are the rank's alone and resolved there,
+//! in canonical order. Every other chain may span ranks: its contacts (with both
+//! disks' states) are gathered on every rank, which resolve them all in canonical
+//! order and keep the velocities of their own disks. So every chain sees its contacts
+//! in the serial order, which is why the bits agree.
+
+use std::collections::HashMap;
+use std::ops::Range;
+use std::time::Instant;
+
+use crate::backend::comm::Communicator;
+use crate::backend::{BackendError, Measured, RunOutcome, StageSeconds, Workers, summarize, timed};
+use crate::sim::collision::{PairSide, collide_pair};
+use crate::sim::grid::{Contact, Entry, StripGrid, StripLayout, receive_band, refresh_band};
+use crate::sim::observe::observe;
+use crate::sim::particles::PACKED_LEN;
+use crate::sim::schedule::ContactSchedule;
+use crate::sim::step::{
+    FIRST_BUILDS_SINCE_REORDER, REORDER_INTERVAL, advance_disks, resolve_in_order,
+};
+use crate::sim::{Boundary, Particles, StepCounters};
+use crate::spec::RunSpec;
+
+/// Runs `spec` on every rank of `comm` (all ranks call this together). Rank 0 returns
+/// the summary and the whole final state; the other ranks return `None`.
+pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcome>, BackendError> {
+    let setup_start = Instant::now();
+    // Every rank builds the same initial state from the seed and keeps its slab.
+    let prepared = spec.prepare()?;
+    let scene = &prepared.scene;
+    let layout = StripLayout::new(
+        &scene.domain,
+        scene.particles.max_radius(),
+        scene.particles.len(),
+    );
+    let slabs = slabs(&layout, &scene.particles, comm.size())?;
+    let mut rank = RankState::new(comm, &prepared.scene, layout, &slabs);
+    let setup_s = setup_start.elapsed().as_secs_f64();
+
+    let loop_start = Instant::now();
+    for _ in 0..prepared.steps {
+        rank.step(comm, prepared.params.dt);
+    }
+    let wall_s = loop_start.elapsed().as_secs_f64();
+
+    // Collective reductions: the whole state and the counters, on every rank.
+    let mut mine = Vec::with_capacity(rank.particles.len() * PACKED_LEN);
+    for idx in 0..rank.particles.len() {
+        rank.particles.pack(idx, &mut mine);
+    }
+    let states = comm.all_gather(&mine);
+    let c = &rank.counters;
+    let s = &rank.stages;
+    let figures = [
+        c.pair_collisions as f64,
+        c.wall_collisions as f64,
+        c.max_overlap,
+        wall_s,
+        s.integration,
+        s.broad_phase,
+        s.collisions,
+        s.communication,
+    ];
+    let all_figures = comm.all_gather(&figures);
+    if comm.rank() != 0 {
+        return Ok(None);
+    }
+    let mut last = Particles::with_capacity(scene.particles.len());
+    for packed in &states {
+        last.unpack_append(packed);
+    }
+    let mut counters = rank.shared_counters;
+    let mut stages = StageSeconds::default();
+    let mut slowest_wall_s = 0.0_f64;
+    for f in &all_figures {
+        counters.merge(&StepCounters {
+            pair_collisions: f[0] as u64,
+            wall_collisions: f[1] as u64,
+            max_overlap: f[2],
+        });
+        // The slowest rank sets the pace: report its time, and each stage's longest.
+        slowest_wall_s = slowest_wall_s.max(f[3]);
+        stages.integration = stages.integration.max(f[4]);
+        stages.broad_phase = stages.broad_phase.max(f[5]);
+        stages.collisions = stages.collisions.max(f[6]);
+        stages.communication = stages.communication.max(f[7]);
+    }
+    let measured = Measured {
+        setup_s,
+        wall_s: slowest_wall_s,
+        stages,
+        counters,
+        initial: observe(&scene.particles),
+    };
+    let workers = Workers {
+        backend: "mpi",
+        threads: 1,
+        ranks: comm.size(),
+    };
+    let summary = summarize(&prepared, workers, &measured, &last);
+    Ok(Some(RunOutcome {
+        summary,
+        final_state: last,
+    }))
+}
+
+/// Cuts the strips into `n_ranks` slabs of whole strips, each at least one strip, so
+/// that the disks of `particles` are shared out as evenly as whole strips allow.
+fn slabs(
+    layout: &StripLayout,
+    particles: &Particles,
+    n_ranks: usize,
+) -> Result<Vec<Range<usize>>, BackendError> {
+    let n_strips = layout.n_strips;
+    if n_strips < n_ranks {
+        return Err(BackendError::Mpi(format!(
+            "the box is {n_strips} strips (one contact diameter each) tall, fewer than the \
+             {n_ranks} ranks asked for; use at most {n_strips} ranks or a taller box"
+        )));
+    }
+    let mut per_strip = vec![0usize; n_strips];
+    for &y in &particles.y {
+        per_strip[layout.strip_of(y)] += 1;
+    }
+    let total = particles.len();
+    let mut slabs = Vec::with_capacity(n_ranks);
+    let (mut start, mut count) = (0, 0);
+    for rank in 0..n_ranks - 1 {
+        let share = total * (rank + 1) / n_ranks;
+        // Leave at least one strip for each rank still to come.
+        let last_end = n_strips - (n_ranks - rank - 1);
+        let mut end = start + 1;
+        count += per_strip[start];
+        while end < last_end && count < share {
+            count += per_strip[end];
+            end += 1;
+        }
+        slabs.push(start..end);
+        start = end;
+    }
+    slabs.push(start..n_strips);
+    Ok(slabs)
+}
+
+/// One rank's disks, grid and scratch memory.
+struct RankState {
+    domain: crate::sim::Domain,
+    physics: crate::sim::Physics,
+    layout: StripLayout,
+    slab: Range<usize>,
+    /// Owner rank of each strip.
+    owner: Vec<usize>,
+    /// Rank that receives this slab's first strip as ghosts, if any.
+    export_to: Option<usize>,
+    /// Rank that sends the ghost strip, if any.
+    ghosts_from: Option<usize>,
+    /// The rank's own disks; during a step, ghosts follow them.
+    particles: Particles,
+    /// How many of `particles` are the rank's own (the rest are this step's ghosts).
+    n_own: usize,
+    grid: StripGrid,
+    builds_since_reorder: u32,
+    movers: Vec<Entry>,
+    contacts: Vec<Contact>,
+    shared: Vec<Contact>,
+    schedule: ContactSchedule,
+    /// What this rank's own steps did.
+    counters: StepCounters,
+    /// What the resolution of shared chains did: the same on every rank, counted once.
+    shared_counters: StepCounters,
+    stages: StageSeconds,
+}
+
+impl RankState {
+    fn new<C: Communicator>(
+        comm: &C,
+        scene: &crate::sim::Scene,
+        layout: StripLayout,
+        slabs: &[Range<usize>],
+    ) -> RankState {
+        let me = comm.rank();
+        let slab = slabs[me].clone();
+        let mut owner = vec![0; layout.n_strips];
+        for (rank, strips) in slabs.iter().enumerate() {
+            owner[strips.clone()].fill(rank);
+        }
+        let all = &scene.particles;
+        let mut packed = Vec::new();
+        for idx in 0..all.len() {
+            if slab.contains(&layout.strip_of(all.y[idx])) {
+                all.pack(idx, &mut packed);
+            }
+        }
+        let mut particles = Particles::with_capacity(packed.len() / PACKED_LEN);
+        particles.unpack_append(&packed);
+        let mut grid = StripGrid::window(&scene.domain, layout, slab.clone());
+        grid.fill(&particles, 0..particles.len());
+        let periodic = scene.domain.boundary == Boundary::Periodic;
+        let below = match slab.start {
+            0 if periodic => Some(layout.n_strips - 1),
+            0 => None,
+            start => Some(start - 1),
+        };
+        let other = |strip: usize| Some(owner[strip]).filter(|&rank| rank != me);
+        RankState {
+            domain: scene.domain,
+            physics: scene.physics,
+            layout,
+            export_to: below.and_then(other),
+            ghosts_from: grid.ghost_strip().and_then(other),
+            slab,
+            owner,
+            n_own: particles.len(),
+            particles,
+            grid,
+            builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
+            movers: Vec::new(),
+            contacts: Vec::new(),
+            shared: Vec::new(),
+            schedule: ContactSchedule::default(),
+            counters: StepCounters::default(),
+            shared_counters: StepCounters::default(),
+            stages: StageSeconds::default(),
+        }
+    }
+
+    fn step<C: Communicator>(&mut self, comm: &C, dt: f64) {
+        let mut stages = self.stages;
+        timed(&mut stages.integration, || {
+            let hits = advance_disks(
+                &self.domain,
+                &self.physics,
+                dt,
+                self.particles.disk_slices_mut(),
+            );
+            self.counters.wall_collisions += hits;
+        });
+        let emigrants = timed(&mut stages.broad_phase, || self.refresh(comm.size()));
+        let immigrants = timed(&mut stages.communication, || comm.exchange(&emigrants));
+        timed(&mut stages.broad_phase, || {
+            self.migrate(comm.size(), &immigrants)
+        });
+        let ghosts = timed(&mut stages.communication, || {
+            comm.exchange(&self.halo(comm.size()))
+        });
+        timed(&mut stages.broad_phase, || self.find_contacts(&ghosts));
+        timed(&mut stages.collisions, || self.resolve_own_chains());
+        let shared = timed(&mut stages.communication, || {
+            comm.all_gather(&self.pack_shared())
+        });
+        timed(&mut stages.collisions, || {
+            self.resolve_shared_chains(&shared)
+        });
+        self.stages = stages;
+    }
+
+    /// Re-sorts the slab after the disks moved; returns, packed per destination rank,
+    /// the disks that left it (their slots are freed by [`RankState::migrate`]).
+    fn refresh(&mut self, n_ranks: usize) -> Vec<Vec<f64>> {
+        self.movers.clear();
+        let strips = self.grid.owned_strips_mut();
+        refresh_band(
+            &self.layout,
+            strips,
+            self.slab.start,
+            &self.particles,
+            &mut self.movers,
+        );
+        let staying = self.movers.partition_point(|m| m.strip() < self.slab.start)
+            ..self.movers.partition_point(|m| m.strip() < self.slab.end);
+        receive_band(strips, self.slab.start, &[&self.movers[staying.clone()]]);
+        let mut outgoing = vec![Vec::new(); n_ranks];
+        for (pos, mover) in self.movers.iter().enumerate() {
+            if !staying.contains(&pos) {
+                let to = self.owner[mover.strip()];
+                self.particles.pack(mover.idx() as usize, &mut outgoing[to]);
+            }
+        }
+        outgoing
+    }
+
+    /// Frees the slots of the disks that left and takes in the disks that arrived; every
+    /// [`REORDER_INTERVAL`] builds, re-stores the disks in grid order.
+    fn migrate(&mut self, n_ranks: usize, immigrants: &[Vec<f64>]) {
+        debug_assert_eq!(immigrants.len(), n_ranks);
+        let staying = self.slab.clone();
+        let mut leaving: Vec<u32> = self
+            .movers
+            .iter()
+            .filter(|mover| !staying.contains(&mover.strip()))
+            .map(Entry::idx)
+            .collect();
+        // Highest slots first, so the last disk moved into a freed slot is never one
+        // that is itself leaving.
+        leaving.sort_unstable_by(|a, b| b.cmp(a));
+        for idx in leaving {
+            let last = self.particles.len() - 1;
+            if idx as usize != last {
+                self.grid.relabel(self.particles.y[last], last as u32, idx);
+            }
+            self.particles.swap_remove(idx as usize);
+        }
+        let first_new = self.particles.len();
+        for packed in immigrants {
+            self.particles.unpack_append(packed);
+        }
+        let mut arrived: Vec<Entry> = (first_new..self.particles.len())
+            .map(|idx| self.grid.entry(&self.particles, idx))
+            .collect();
+        arrived.sort_unstable_by(|a, b| a.strip().cmp(&b.strip()).then(a.x().total_cmp(&b.x())));
+        receive_band(self.grid.owned_strips_mut(), self.slab.start, &[&arrived]);
+
+        self.builds_since_reorder += 1;
+        if self.builds_since_reorder >= REORDER_INTERVAL {
+            self.particles.reorder(&self.grid.sorted_indices());
+            self.grid.storage_now_sorted();
+            self.builds_since_reorder = 0;
+        }
+    }
+
+    /// The disks of the slab's first strip, in x order, packed for the rank below.
+    fn halo(&self, n_ranks: usize) -> Vec<Vec<f64>> {
+        let mut outgoing = vec![Vec::new(); n_ranks];
+        if let Some(to) = self.export_to {
+            for entry in self.grid.strip_entries(self.slab.start) {
+                self.particles.pack(entry.idx() as usize, &mut outgoing[to]);
+            }
+        }
+        outgoing
+    }
+
+    /// Appends the ghosts after the own disks, finds the pairs the slab scans, and
+    /// splits them into chains of the rank's own and chains to share.
+    fn find_contacts(&mut self, ghosts: &[Vec<f64>]) {
+        let n_own = self.particles.len();
+        self.n_own = n_own;
+        if let Some(from) = self.ghosts_from {
+            self.particles.unpack_append(&ghosts[from]);
+            self.grid
+                .set_ghosts(&self.particles, n_own..self.particles.len());
+        }
+        self.contacts.clear();
+        self.grid
+            .find_contacts(&self.particles, &self.domain, &mut self.contacts);
+        let (particles, layout, first) = (&self.particles, &self.layout, self.slab.start);
+        let exporting = self.export_to.is_some();
+        // Ghosts and exported disks are seen by another rank too: their chains are shared.
+        let seen_elsewhere = |disk: u32| {
+            disk as usize >= n_own
+                || (exporting && layout.strip_of(particles.y[disk as usize]) == first)
+        };
+        self.schedule.split_pinned(
+            particles.len(),
+            std::slice::from_mut(&mut self.contacts),
+            &mut self.shared,
+            seen_elsewhere,
+        );
+        self.contacts.sort_unstable_by_key(|contact| contact.key);
+    }
+
+    fn resolve_own_chains(&mut self) {
+        let e = self.physics.restitution;
+        resolve_in_order(
+            &mut self.particles,
+            &self.domain,
+            e,
+            &self.contacts,
+            &mut self.counters,
+        );
+    }
+
+    /// Both disks of every shared contact, packed: the input of every rank's
+    /// [`RankState::resolve_shared_chains`].
+    fn pack_shared(&self) -> Vec<f64> {
+        let mut packed = Vec::with_capacity(self.shared.len() * 2 * PACKED_LEN);
+        for contact in &self.shared {
+            self.particles.pack(contact.a as usize, &mut packed);
+            self.particles.pack(contact.b as usize, &mut packed);
+        }
+        packed
+    }
+
+    /// Resolves the shared contacts of all ranks in canonical order (the same work on
+    /// every rank), keeps the velocities of this rank's disks, and drops the ghosts.
+    fn resolve_shared_chains(&mut self, shared: &[Vec<f64>]) {
+        // Packed records by id: [id, x, y, vx, vy, radius, mass], velocities updated in place.
+        let mut disks: HashMap<u32, [f64; PACKED_LEN]> = HashMap::new();
+        let mut pairs: Vec<(u32, u32)> = Vec::new();
+        for packed in shared {
+            for pair in packed.chunks_exact(2 * PACKED_LEN) {
+                let (a, b) = pair.split_at(PACKED_LEN);
+                for record in [a, b] {
+                    let record: [f64; PACKED_LEN] = record.try_into().expect("one record");
+                    disks.entry(record[0] as u32).or_insert(record);
+                }
+                pairs.push((a[0] as u32, b[0] as u32));
+            }
+        }
+        pairs.sort_unstable();
+        let e = self.physics.restitution;
+        for (a, b) in pairs {
+            let [_, xa, ya, vxa, vya, ra, ma] = disks[&a];
+            let [_, xb, yb, vxb, vyb, rb, mb] = disks[&b];
+            let (dx, dy) = self.domain.separation(xa, ya, xb, yb);
+            let side_a = PairSide {
+                mass: ma,
+                vx: vxa,
+                vy: vya,
+            };
+            let side_b = PairSide {
+                mass: mb,
+                vx: vxb,
+                vy: vyb,
+            };
+            let (outcome, velocities) = collide_pair(e, dx, dy, ra + rb, side_a, side_b);
+            self.shared_counters.record(outcome);
+            if let Some([after_a, after_b]) = velocities {
+                for (id, [vx, vy]) in [(a, after_a), (b, after_b)] {
+                    let record = disks.get_mut(&id).expect("every shared disk was unpacked");
+                    (record[3], record[4]) = (vx, vy);
+                }
+            }
+        }
+        // Own disks in shared chains: those in this rank's shared contacts, and exported
+        // ones, which another rank's contacts may hold.
+        let n_own = self.n_own;
+        let mut own_slots: HashMap<u32, usize> = HashMap::new();
+        for contact in &self.shared {
+            for idx in [contact.a as usize, contact.b as usize] {
+                if idx < n_own {
+                    own_slots.insert(self.particles.id[idx], idx);
+                }
+            }
+        }
+        if self.export_to.is_some() {
+            for entry in self.grid.strip_entries(self.slab.start) {
+                let idx = entry.idx() as usize;
+                own_slots.insert(self.particles.id[idx], idx);
+            }
+        }
+        for (id, record) in &disks {
+            if let Some(&idx) = own_slots.get(id) {
+                self.particles.vx[idx] = record[3];
+                self.particles.vy[idx] = record[4];
+            }
+        }
+        self.particles.truncate(n_own);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::backend::comm::ThreadComm;
+    use crate::backend::serial;
+    use crate::sim::scene::{Extent, GasSpec, MassRule, Placement, RadiusDistribution};
+    use crate::sim::{Broadphase, Physics};
+    use crate::spec::{DtChoice, MethodSpec, SceneSource};
+
+    fn spec(boundary: Boundary, restitution: f64, packing: f64) -> RunSpec {
+        RunSpec {
+            scene: SceneSource::Gas(GasSpec {
+                n_particles: 2000,
+                extent: Extent::Packing(packing),
+                radius: RadiusDistribution::Uniform { min: 0.6, max: 1.4 },
+                mass: MassRule::Area,
+                speed_rms: 1.0,
+                placement: Placement::Random,
+                boundary,
+                physics: Physics {
+                    restitution,
+                    wall_restitution: restitution,
+                    gravity: None,
+                },
+                seed: 17,
+            }),
+            method: MethodSpec {
+                dt: DtChoice::Fixed(0.05),
+                steps: 300,
+                broadphase: Broadphase::Grid,
+            },
+        }
+    }
+
+    fn run_on_threads(spec: &RunSpec, ranks: usize) -> RunOutcome {
+        let outcomes: Vec<Option<RunOutcome>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = ThreadComm::group(ranks)
+                .into_iter()
+                .map(|comm| scope.spawn(move || run(&comm, spec).unwrap()))
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        assert!(outcomes[1..].iter().all(Option::is_none));
+        outcomes.into_iter().next().unwrap().unwrap()
+    }
+
+    #[test]
+    fn ranks_as_threads_give_the_serial_hash() {
+        for boundary in [Boundary::Walls, Boundary::Periodic] {
+            for restitution in [1.0, 0.8] {
+                for packing in [0.05, 0.35] {
+                    let spec = spec(boundary, restitution, packing);
+                    let reference = serial::run(&spec).unwrap().summary;
+                    for ranks in [1, 2, 3, 4] {
+                        let summary = run_on_threads(&spec, ranks).summary;
+                        let case =
+                            format!("{boundary:?} e={restitution} η={packing} {ranks} ranks");
+                        assert_eq!(summary.state_hash, reference.state_hash, "{case}");
+                        assert_eq!(summary.pair_collisions, reference.pair_collisions, "{case}");
+                        assert_eq!(summary.wall_collisions, reference.wall_collisions, "{case}");
+                        assert_eq!(summary.max_overlap, reference.max_overlap, "{case}");
+                        assert_eq!(summary.n, reference.n);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn more_ranks_than_strips_is_refused_with_the_limit() {
+        let spec = spec(Boundary::Walls, 1.0, 0.05);
+        let prepared = spec.prepare().unwrap();
+        let particles = &prepared.scene.particles;
+        let layout = StripLayout::new(
+            &prepared.scene.domain,
+            particles.max_radius(),
+            particles.len(),
+        );
+        let error = slabs(&layout, particles, layout.n_strips + 1).unwrap_err();
+        assert!(error.to_string().contains("use at most"), "{error}");
+        let cut = slabs(&layout, particles, 3).unwrap();
+        assert_eq!((cut[0].start, cut[2].end), (0, layout.n_strips));
+        assert!(
+            cut.windows(2)
+                .all(|w| w[0].end == w[1].start && !w[1].is_empty())
+        );
+    }
+}
