@@ -4,10 +4,12 @@ use std::num::NonZeroUsize;
 
 use anyhow::{Context, bail};
 
-use crate::backend::{BackendSpec, serial, threads};
+use crate::backend::{BackendSpec, RunOutcome, serial, threads};
 use crate::cli::{BackendName, Cli, Command, SimulateArgs};
 use crate::output::{write_atomically, write_state_csv};
 use crate::scene_file;
+#[cfg(feature = "mpi")]
+use crate::summary::RunSummary;
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
@@ -18,28 +20,90 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
 fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let backend = backend_spec(args)?;
     let spec = scene_file::load(&args.scene, &args.overrides())?;
-    let outcome = match backend {
-        BackendSpec::Serial => serial::run(&spec),
-        BackendSpec::Rayon { threads } => threads::run(&spec, threads),
-        BackendSpec::Mpi { .. } => bail!(
-            "this collide was built without MPI support; rebuild it with \
-             `cargo build --release --features mpi` after installing OpenMPI \
-             (`apt-get install libopenmpi-dev openmpi-bin libclang-dev`)"
-        ),
-    }
-    .with_context(|| format!("{}", args.scene.display()))?;
-    if let Some(path) = &args.dump {
-        write_atomically(path, |out| write_state_csv(out, &outcome.final_state))?;
-    }
+    let context = || format!("{}", args.scene.display());
+    let finished = match backend {
+        BackendSpec::Serial => Finished::Here(serial::run(&spec).with_context(context)?),
+        BackendSpec::Rayon { threads } => {
+            Finished::Here(threads::run(&spec, threads).with_context(context)?)
+        }
+        BackendSpec::Mpi { ranks } => run_mpi(args, &spec, ranks).with_context(context)?,
+    };
+    let summary = match finished {
+        Finished::Here(outcome) => {
+            if let Some(path) = &args.dump {
+                write_atomically(path, |out| write_state_csv(out, &outcome.final_state))?;
+            }
+            outcome.summary
+        }
+        #[cfg(feature = "mpi")]
+        Finished::Launched(summary) => summary,
+        #[cfg(feature = "mpi")]
+        Finished::OtherRank => return Ok(()),
+    };
     if args.json {
-        println!("{}", serde_json::to_string(&outcome.summary)?);
+        println!("{}", serde_json::to_string(&summary)?);
     } else {
-        println!("{}", outcome.summary);
+        println!("{summary}");
         if let Some(path) = &args.dump {
             println!("final state written to {}", path.display());
         }
     }
     Ok(())
+}
+
+/// Where a run ended.
+enum Finished {
+    /// In this process, with the final state.
+    Here(RunOutcome),
+    /// In ranks this process launched; rank 0 wrote any `--dump` file.
+    #[cfg(feature = "mpi")]
+    Launched(RunSummary),
+    /// This process is an MPI rank other than 0: rank 0 reports.
+    #[cfg(feature = "mpi")]
+    OtherRank,
+}
+
+#[cfg(feature = "mpi")]
+fn run_mpi(
+    args: &SimulateArgs,
+    spec: &crate::spec::RunSpec,
+    ranks: Option<NonZeroUsize>,
+) -> anyhow::Result<Finished> {
+    use crate::backend::{launcher, mpi};
+    if mpi::launched_by_mpi() {
+        return Ok(match mpi::run_rank(spec, ranks.map(NonZeroUsize::get))? {
+            Some(outcome) => Finished::Here(outcome),
+            None => Finished::OtherRank,
+        });
+    }
+    let launch = launcher::Launch {
+        ranks: ranks.map_or_else(logical_cores, NonZeroUsize::get),
+        launcher: args.launcher.clone(),
+        timeout: std::time::Duration::from_secs_f64(args.mpi_timeout),
+    };
+    // The ranks run this same command line; rank 0 answers in JSON.
+    let mut forwarded: Vec<std::ffi::OsString> = std::env::args_os().skip(1).collect();
+    if !args.json {
+        forwarded.push("--json".into());
+    }
+    Ok(Finished::Launched(launcher::launch(&launch, &forwarded)?))
+}
+
+#[cfg(not(feature = "mpi"))]
+fn run_mpi(
+    _: &SimulateArgs,
+    _: &crate::spec::RunSpec,
+    _: Option<NonZeroUsize>,
+) -> anyhow::Result<Finished> {
+    bail!(
+        "this collide was built without MPI support; rebuild it with \
+         `cargo build --release --features mpi` after installing OpenMPI \
+         (`apt-get install libopenmpi-dev openmpi-bin libclang-dev`)"
+    )
+}
+
+fn logical_cores() -> usize {
+    crate::backend::machine_cores()
 }
 
 /// The backend the flags ask for; worker counts only go with the backend they count.
@@ -54,9 +118,9 @@ fn backend_spec(args: &SimulateArgs) -> anyhow::Result<BackendSpec> {
     Ok(match name {
         BackendName::Serial => BackendSpec::Serial,
         BackendName::Rayon => BackendSpec::Rayon {
-            threads: args.threads.unwrap_or_else(|| {
-                std::thread::available_parallelism().unwrap_or(NonZeroUsize::MIN)
-            }),
+            threads: args
+                .threads
+                .unwrap_or_else(|| NonZeroUsize::new(logical_cores()).unwrap_or(NonZeroUsize::MIN)),
         },
         BackendName::Mpi => BackendSpec::Mpi { ranks: args.ranks },
     })

@@ -62,6 +62,13 @@ pub struct SimulateArgs {
     /// MPI ranks to launch (with --backend mpi; default under mpirun: its world size).
     #[arg(long, value_parser = parse_workers)]
     pub ranks: Option<NonZeroUsize>,
+    /// MPI launcher and its options, followed by `-n RANKS` and this program
+    /// (e.g. "mpirun --bind-to core", or "mpiexec" for MPICH).
+    #[arg(long, env = "COLLIDE_MPI_LAUNCHER", default_value = "mpirun")]
+    pub launcher: String,
+    /// Seconds before a launched MPI run is killed with all its ranks.
+    #[arg(long, env = "COLLIDE_MPI_TIMEOUT", default_value_t = 3600.0, value_parser = parse_seconds)]
+    pub mpi_timeout: f64,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -96,6 +103,15 @@ fn parse_dt(text: &str) -> Result<DtValue, String> {
 fn parse_workers(text: &str) -> Result<NonZeroUsize, String> {
     text.parse::<NonZeroUsize>()
         .map_err(|_| format!("expected a whole number of at least 1, got \"{text}\""))
+}
+
+fn parse_seconds(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(seconds) if seconds > 0.0 && seconds.is_finite() => Ok(seconds),
+        _ => Err(format!(
+            "expected a positive number of seconds, got \"{text}\""
+        )),
+    }
 }
 
 fn parse_broadphase(text: &str) -> Result<Broadphase, String> {

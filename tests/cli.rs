@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-fn collide(args: &[&str]) -> Output {
+pub fn collide(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_collide"))
         .args(args)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
@@ -12,7 +12,7 @@ fn collide(args: &[&str]) -> Output {
         .expect("the collide binary runs")
 }
 
-fn scene_file(dir: &Path, name: &str, text: &str) -> PathBuf {
+pub fn scene_file(dir: &Path, name: &str, text: &str) -> PathBuf {
     let path = dir.join(name);
     std::fs::write(&path, text).unwrap();
     path

@@ -2,4 +2,6 @@
 
 mod backends;
 mod cli;
+#[cfg(feature = "mpi")]
+mod mpi;
 mod physics;

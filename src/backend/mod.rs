@@ -5,6 +5,10 @@
 
 pub mod comm;
 pub mod distributed;
+#[cfg(feature = "mpi")]
+pub mod launcher;
+#[cfg(feature = "mpi")]
+pub mod mpi;
 pub mod serial;
 pub mod threads;
 
@@ -30,6 +34,16 @@ pub enum BackendSpec {
     Mpi {
         ranks: Option<NonZeroUsize>,
     },
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn cpu_lists_count_ranges_and_singles() {
+        assert_eq!(super::count_cpu_list("0-1\n"), Some(2));
+        assert_eq!(super::count_cpu_list("0-3,8,10-11"), Some(7));
+        assert_eq!(super::count_cpu_list("garbage"), None);
+    }
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -82,6 +96,28 @@ pub struct Workers {
     pub ranks: usize,
 }
 
+/// Logical CPUs online on this machine, whatever this process is bound to (an MPI rank
+/// bound to one core still counts them all); the affinity-aware count as a fallback.
+pub fn machine_cores() -> usize {
+    let online = std::fs::read_to_string("/sys/devices/system/cpu/online").ok();
+    online
+        .as_deref()
+        .and_then(count_cpu_list)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, NonZeroUsize::get))
+}
+
+/// Counts the CPUs in a kernel CPU list such as `0-3,8,10-11`.
+fn count_cpu_list(list: &str) -> Option<usize> {
+    let mut count = 0;
+    for range in list.trim().split(',') {
+        count += match range.split_once('-') {
+            Some((first, last)) => last.parse::<usize>().ok()? + 1 - first.parse::<usize>().ok()?,
+            None => range.parse::<usize>().map(|_| 1).ok()?,
+        };
+    }
+    Some(count)
+}
+
 /// What the stepping loop measured, for [`summarize`].
 #[derive(Clone, Copy, Debug)]
 pub struct Measured {
@@ -103,7 +139,7 @@ pub fn summarize(
     let steps = prepared.steps;
     let wall_s = measured.wall_s;
     let final_observables = observe(last);
-    let cores = std::thread::available_parallelism().map_or(1, NonZeroUsize::get);
+    let cores = machine_cores();
     RunSummary {
         n,
         steps,

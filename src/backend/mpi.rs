@@ -1,0 +1,110 @@
+//! MPI through rsmpi (feature `mpi`): the [`Communicator`] of the distributed backend,
+//! and one rank's run when collide was started by `mpirun`.
+
+use mpi::Count;
+use mpi::datatype::{Partition, PartitionMut};
+use mpi::topology::SimpleCommunicator;
+use mpi::traits::{Communicator as _, CommunicatorCollectives};
+
+use crate::backend::comm::Communicator;
+use crate::backend::{BackendError, RunOutcome, distributed};
+use crate::spec::RunSpec;
+
+/// True when this process is a rank started by an MPI launcher (OpenMPI, MPICH, PMIx).
+pub fn launched_by_mpi() -> bool {
+    ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK"]
+        .iter()
+        .any(|name| std::env::var_os(name).is_some())
+}
+
+/// Runs `spec` as one rank of the MPI world. `ranks`, when given, must be the world
+/// size. Returns the outcome on rank 0 and `None` on the others.
+pub fn run_rank(spec: &RunSpec, ranks: Option<usize>) -> Result<Option<RunOutcome>, BackendError> {
+    let universe = mpi::initialize()
+        .ok_or_else(|| BackendError::Mpi("MPI was already initialised in this process".into()))?;
+    let comm = MpiComm {
+        world: universe.world(),
+    };
+    if let Some(asked) = ranks
+        && asked != comm.size()
+    {
+        return Err(BackendError::Mpi(format!(
+            "--ranks {asked} but mpirun started {} ranks; drop --ranks or make them agree",
+            comm.size()
+        )));
+    }
+    distributed::run(&comm, spec)
+}
+
+struct MpiComm {
+    world: SimpleCommunicator,
+}
+
+/// Offsets of consecutive blocks of the given sizes.
+fn displacements(counts: &[Count]) -> Vec<Count> {
+    counts
+        .iter()
+        .scan(0, |offset, &count| {
+            let start = *offset;
+            *offset += count;
+            Some(start)
+        })
+        .collect()
+}
+
+/// Cuts `buffer` into consecutive blocks of the given sizes.
+fn split_blocks(buffer: &[f64], counts: &[Count]) -> Vec<Vec<f64>> {
+    let mut rest = buffer;
+    counts
+        .iter()
+        .map(|&count| {
+            let (block, tail) = rest.split_at(count as usize);
+            rest = tail;
+            block.to_vec()
+        })
+        .collect()
+}
+
+fn count_of(buffer: &[f64]) -> Count {
+    Count::try_from(buffer.len()).expect("an MPI message below 2^31 values")
+}
+
+impl Communicator for MpiComm {
+    fn rank(&self) -> usize {
+        self.world.rank() as usize
+    }
+
+    fn size(&self) -> usize {
+        self.world.size() as usize
+    }
+
+    fn exchange(&self, outgoing: &[Vec<f64>]) -> Vec<Vec<f64>> {
+        let send_counts: Vec<Count> = outgoing.iter().map(|buffer| count_of(buffer)).collect();
+        let mut recv_counts = vec![0; self.size()];
+        self.world
+            .all_to_all_into(&send_counts[..], &mut recv_counts[..]);
+        let send = outgoing.concat();
+        let mut recv = vec![0.0; recv_counts.iter().map(|&c| c as usize).sum()];
+        {
+            let send_displs = displacements(&send_counts);
+            let recv_displs = displacements(&recv_counts);
+            let partition = Partition::new(&send[..], &send_counts[..], &send_displs[..]);
+            let mut received = PartitionMut::new(&mut recv[..], &recv_counts[..], &recv_displs[..]);
+            self.world
+                .all_to_all_varcount_into(&partition, &mut received);
+        }
+        split_blocks(&recv, &recv_counts)
+    }
+
+    fn all_gather(&self, data: &[f64]) -> Vec<Vec<f64>> {
+        let mut counts = vec![0; self.size()];
+        self.world.all_gather_into(&count_of(data), &mut counts[..]);
+        let mut recv = vec![0.0; counts.iter().map(|&c| c as usize).sum()];
+        {
+            let displs = displacements(&counts);
+            let mut received = PartitionMut::new(&mut recv[..], &counts[..], &displs[..]);
+            self.world.all_gather_varcount_into(data, &mut received);
+        }
+        split_blocks(&recv, &counts)
+    }
+}

@@ -1,0 +1,127 @@
+//! The MPI backend through real `mpirun`: the serial hash at 1, 2, 3 and 4 ranks, and
+//! clear errors when the launcher fails or hangs. Built only with `--features mpi`.
+
+use std::os::unix::fs::PermissionsExt;
+use std::time::{Duration, Instant};
+
+use crate::cli::{collide, scene_file};
+
+/// The JSON summary a successful run prints on its last line.
+fn summary(args: &[&str]) -> serde_json::Value {
+    let out = collide(&[args, &["--json"]].concat());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{args:?} failed: {stderr}");
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
+}
+
+#[test]
+fn mpi_at_1_2_3_and_4_ranks_gives_the_serial_hash() {
+    let dir = tempfile::tempdir().unwrap();
+    for boundary in ["walls", "periodic"] {
+        for restitution in [1.0, 0.8] {
+            for packing in [0.05, 0.35] {
+                let text = format!(
+                    "[scene]\nn = 1500\npacking = {packing}\nradius = {{ min = 0.6, max = 1.4 }}\n\
+                     mass = \"area\"\nrestitution = {restitution}\nwall_restitution = {restitution}\n\
+                     boundary = \"{boundary}\"\nseed = 4\n[method]\ndt = 0.05\nsteps = 200\n"
+                );
+                let name = format!("{boundary}-{restitution}-{packing}.toml");
+                let path = scene_file(dir.path(), &name, &text);
+                let path = path.to_str().unwrap();
+                let serial = summary(&["simulate", path]);
+                assert!(serial["pair_collisions"].as_u64().unwrap() > 50, "{name}");
+                for ranks in ["1", "2", "3", "4"] {
+                    let mpi = summary(&["simulate", path, "--backend", "mpi", "--ranks", ranks]);
+                    assert_eq!(
+                        mpi["state_hash"], serial["state_hash"],
+                        "{name} {ranks} ranks"
+                    );
+                    assert_eq!(mpi["pair_collisions"], serial["pair_collisions"], "{name}");
+                    assert_eq!(mpi["ranks"].as_u64(), Some(ranks.parse().unwrap()));
+                    assert_eq!(mpi["backend"], "mpi");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn mpi_dump_is_written_by_rank_0_in_id_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let serial_csv = dir.path().join("serial.csv");
+    let mpi_csv = dir.path().join("mpi.csv");
+    let scene = "experiments/scenes/seed-1000.toml";
+    summary(&["simulate", scene, "--dump", serial_csv.to_str().unwrap()]);
+    summary(&[
+        "simulate",
+        scene,
+        "--backend",
+        "mpi",
+        "--ranks",
+        "2",
+        "--dump",
+        mpi_csv.to_str().unwrap(),
+    ]);
+    let serial = std::fs::read_to_string(serial_csv).unwrap();
+    assert_eq!(serial.lines().count(), 1001);
+    assert_eq!(std::fs::read_to_string(mpi_csv).unwrap(), serial);
+}
+
+/// A fake launcher: a shell script with the given body.
+fn launcher(dir: &std::path::Path, body: &str) -> String {
+    let path = dir.join("fake-mpirun");
+    std::fs::write(&path, format!("#!/bin/sh\n{body}\n")).unwrap();
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+    path.to_str().unwrap().to_owned()
+}
+
+#[test]
+fn a_hung_launch_is_killed_at_the_timeout_and_a_failed_one_is_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = "experiments/scenes/seed-1000.toml";
+    let hung = launcher(dir.path(), "echo starting ranks >&2; sleep 30");
+    let started = Instant::now();
+    let out = collide(&[
+        "simulate",
+        scene,
+        "--backend",
+        "mpi",
+        "--ranks",
+        "2",
+        "--launcher",
+        &hung,
+        "--mpi-timeout",
+        "1",
+    ]);
+    assert!(
+        started.elapsed() < Duration::from_secs(10),
+        "{:?}",
+        started.elapsed()
+    );
+    assert!(!out.status.success());
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert!(stderr.contains("did not finish within 1 s"), "{stderr}");
+    assert!(stderr.contains("starting ranks"), "{stderr}");
+
+    let dies = launcher(dir.path(), "echo 'rank 1 exited on signal 9' >&2; exit 137");
+    let out = collide(&["simulate", scene, "--backend", "mpi", "--launcher", &dies]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert!(
+        stderr.contains("failed") && stderr.contains("signal 9"),
+        "{stderr}"
+    );
+
+    let missing = collide(&[
+        "simulate",
+        scene,
+        "--backend",
+        "mpi",
+        "--launcher",
+        "no-such-mpirun",
+    ]);
+    let stderr = String::from_utf8(missing.stderr).unwrap();
+    assert!(stderr.contains("cannot start `no-such-mpirun`"), "{stderr}");
+    assert!(stderr.contains("COLLIDE_MPI_LAUNCHER"), "{stderr}");
+}
