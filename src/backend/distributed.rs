@@ -357,9 +357,10 @@ impl RankState {
             disk as usize >= n_own
                 || (exporting && layout.strip_of(particles.y[disk as usize]) == first)
         };
-        self.schedule.split_pinned(
+        self.shared.clear();
+        self.schedule.split(
             particles.len(),
-            std::slice::from_mut(&mut self.contacts),
+            &mut self.contacts,
             &mut self.shared,
             seen_elsewhere,
         );

@@ -3,9 +3,10 @@
 //!
 //! Per step: disks move in parallel chunks; the grid is refreshed band by band (each
 //! band re-sorts its strips and hands disks that changed strip to the band that now
-//! holds them); each band finds the pairs its strips scan; chains of contacts found
-//! by one band are resolved by that band, in canonical order, while chains that cross
-//! bands are resolved afterwards in canonical order (`sim::schedule`). Every chain
+//! holds them); each band finds the pairs its strips scan and splits them into chains
+//! (`sim::schedule`). A disk in a band's first strip may also be in the pairs of another
+//! band; chains without such a disk are resolved by their band, in canonical order, and
+//! the others afterwards, together, in canonical order. Every chain
 //! therefore sees its contacts in the serial order, which is why the bits agree.
 
 use std::num::NonZeroUsize;
@@ -96,9 +97,12 @@ pub struct ThreadedStepper {
     movers: Vec<Vec<Entry>>,
     /// Per band: the pairs its strips found, then those of chains it resolves alone.
     contacts: Vec<Vec<Contact>>,
-    /// Contacts of chains found by more than one band, in canonical order.
+    /// Per band: the pairs of its chains that reach a band's first strip.
+    handed_over: Vec<Vec<Contact>>,
+    /// Every band's handed-over pairs, in canonical order.
     crossing: Vec<Contact>,
-    schedule: ContactSchedule,
+    /// Per band: union–find scratch.
+    schedules: Vec<ContactSchedule>,
     pub counters: StepCounters,
     pub stages: StageSeconds,
 }
@@ -120,8 +124,9 @@ impl ThreadedStepper {
             builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
             movers: Vec::new(),
             contacts: Vec::new(),
+            handed_over: Vec::new(),
             crossing: Vec::new(),
-            schedule: ContactSchedule::default(),
+            schedules: Vec::new(),
             counters: StepCounters::default(),
             stages: StageSeconds::default(),
         }
@@ -171,35 +176,42 @@ impl ThreadedStepper {
     }
 
     fn find_contacts(&mut self, particles: &mut Particles) {
-        let bands = match self.params.broadphase {
+        self.crossing.clear();
+        match self.params.broadphase {
             Broadphase::Grid => {
                 self.build_grid(particles);
                 let bands = self.grid.bands(self.n_bands);
-                self.contacts.resize_with(bands.len(), Vec::new);
-                let (grid, domain) = (&self.grid, &self.domain);
+                let n_bands = bands.len();
+                self.contacts.resize_with(n_bands, Vec::new);
+                self.handed_over.resize_with(n_bands, Vec::new);
+                self.schedules.resize_with(n_bands, ContactSchedule::default);
+                // A disk in a band's first strip may also be in the contacts of the band
+                // below (its north strip), or of the last band (periodic wrap).
+                let layout = *self.grid.layout();
+                let mut first_of_band = vec![false; layout.n_strips];
+                for band in bands.iter().filter(|_| n_bands > 1) {
+                    first_of_band[band.start] = true;
+                }
+                let pinned = |disk: u32| first_of_band[layout.strip_of(particles.y[disk as usize])];
+                let (grid, domain, particles) = (&self.grid, &self.domain, &*particles);
                 bands
                     .par_iter()
                     .zip(self.contacts.par_iter_mut())
-                    .for_each(|(band, contacts)| {
+                    .zip(self.handed_over.par_iter_mut())
+                    .zip(self.schedules.par_iter_mut())
+                    .for_each(|(((band, contacts), handed_over), schedule)| {
                         contacts.clear();
+                        handed_over.clear();
                         grid.find_contacts_in(band.clone(), particles, domain, contacts);
+                        // Split while the pairs are in scan order, close in memory.
+                        schedule.split(particles.len(), contacts, handed_over, pinned);
+                        contacts.sort_unstable_by_key(|contact| contact.key);
                     });
-                bands.len()
+                self.crossing.extend(self.handed_over.iter().flatten());
+                self.crossing.sort_unstable_by_key(|contact| contact.key);
             }
-            Broadphase::AllPairs => {
-                self.find_all_pairs(particles);
-                1
-            }
-        };
-        // Split while the pairs are still in scan order, close in memory; then order them.
-        self.schedule.split(
-            particles.len(),
-            &mut self.contacts[..bands],
-            &mut self.crossing,
-        );
-        self.contacts[..bands]
-            .par_iter_mut()
-            .for_each(|contacts| contacts.sort_unstable_by_key(|contact| contact.key));
+            Broadphase::AllPairs => self.find_all_pairs(particles),
+        }
     }
 
     /// The grid build, band by band, and every [`REORDER_INTERVAL`] builds the disks
@@ -271,6 +283,7 @@ impl ThreadedStepper {
         self.contacts.resize_with(1, Vec::new);
         self.contacts[0].clear();
         self.contacts[0].extend(found.into_iter().flatten());
+        self.contacts[0].par_sort_unstable_by_key(|contact| contact.key);
     }
 
     fn resolve_contacts(&mut self, particles: &mut Particles) {
@@ -285,12 +298,14 @@ impl ThreadedStepper {
                 .map(|contacts| {
                     let mut counters = StepCounters::default();
                     for contact in contacts {
-                        // SAFETY: `ContactSchedule::split` left in each band's list only
-                        // the chains of contacts found entirely by that band; chains are
-                        // the connected components of the contact graph, so two bands
-                        // never hold contacts of the same disk. Each disk's velocity is
-                        // therefore read and written by one thread only, and positions,
-                        // radii and masses are only read.
+                        // SAFETY: after `ContactSchedule::split`, a band's list holds only
+                        // chains with no disk in any band's first strip. A band's pairs
+                        // touch disks of its own strips and of the next band's first
+                        // strip, so these chains' disks belong to this band's strips
+                        // and to no other band's pairs: two bands never hold contacts of
+                        // the same disk. Each disk's velocity is therefore read and
+                        // written by one thread only; positions, radii and masses are
+                        // only read.
                         counters.record(unsafe { view.resolve(domain, e, contact) });
                     }
                     counters
