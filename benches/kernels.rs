@@ -1,21 +1,26 @@
 //! Criterion benches of the simulator's kernels: one full serial step, the broad phase
-//! and the contact resolution, at N = 100,000 for a dilute and a dense gas.
+//! and the contact resolution at N = 100,000, and one full step of the serial and the
+//! rayon (2 threads) backends at N = 1,000,000, for a dilute and a dense gas.
 //!
 //! Throughput is in disks per iteration, so criterion's "elem/s" is particle-steps per second.
-//! Run: `cargo bench --bench kernels`.
+//! Run: `cargo bench --bench kernels` (MPI runs need `mpirun`: see the README's Speed section).
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 
+use collide::backend::threads::ThreadedStepper;
 use collide::sim::scene::{Extent, GasSpec, MassRule, Placement, RadiusDistribution};
-use collide::sim::{Boundary, Broadphase, Particles, Physics, StepParams, Stepper};
+use collide::sim::{Boundary, Broadphase, Physics, Scene, StepParams, Stepper};
 
-const N_PARTICLES: usize = 100_000;
+/// r = 1 and v_rms = 1 stepped with dt = 0.1, so v_rms·dt = 0.1·r.
+const PARAMS: StepParams = StepParams {
+    dt: 0.1,
+    broadphase: Broadphase::Grid,
+};
+const WARM_UP_STEPS: usize = 50;
 
-/// A gas with r = 1 and v_rms = 1 stepped with dt = 0.1, so v_rms·dt = 0.1·r,
-/// after 50 warm-up steps (the first grid build sorts from scratch).
-fn warmed_up(packing: f64) -> (Particles, Stepper) {
-    let scene = GasSpec {
-        n_particles: N_PARTICLES,
+fn gas(n_particles: usize, packing: f64) -> Scene {
+    GasSpec {
+        n_particles,
         extent: Extent::Packing(packing),
         radius: RadiusDistribution::Fixed(1.0),
         mass: MassRule::Fixed(1.0),
@@ -30,25 +35,21 @@ fn warmed_up(packing: f64) -> (Particles, Stepper) {
         seed: 42,
     }
     .build()
-    .expect("packings below jamming place");
-    let mut particles = scene.particles.clone();
-    let params = StepParams {
-        dt: 0.1,
-        broadphase: Broadphase::Grid,
-    };
-    let mut stepper = Stepper::for_scene(&scene, params);
-    for _ in 0..50 {
-        stepper.step(&mut particles);
-    }
-    (particles, stepper)
+    .expect("packings below jamming place")
 }
 
-fn kernels(c: &mut Criterion) {
+fn serial_kernels(c: &mut Criterion) {
+    const N: usize = 100_000;
     let mut group = c.benchmark_group("serial");
-    group.throughput(Throughput::Elements(N_PARTICLES as u64));
+    group.throughput(Throughput::Elements(N as u64));
     group.sample_size(30);
     for packing in [0.05, 0.3] {
-        let (mut particles, mut stepper) = warmed_up(packing);
+        let scene = gas(N, packing);
+        let mut particles = scene.particles.clone();
+        let mut stepper = Stepper::for_scene(&scene, PARAMS);
+        for _ in 0..WARM_UP_STEPS {
+            stepper.step(&mut particles);
+        }
         group.bench_function(BenchmarkId::new("step", packing), |b| {
             b.iter(|| stepper.step(&mut particles));
         });
@@ -64,5 +65,40 @@ fn kernels(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, kernels);
+/// One step of the serial reference and of the rayon backend on 2 threads, measured in
+/// the same run so that their ratio is the speedup.
+fn backend_steps(c: &mut Criterion) {
+    const N: usize = 1_000_000;
+    let mut group = c.benchmark_group("step_1e6");
+    group.throughput(Throughput::Elements(N as u64));
+    group.sample_size(10);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .expect("a pool of 2 threads");
+    for packing in [0.05, 0.3] {
+        let scene = gas(N, packing);
+        let mut particles = scene.particles.clone();
+        let mut stepper = Stepper::for_scene(&scene, PARAMS);
+        for _ in 0..WARM_UP_STEPS {
+            stepper.step(&mut particles);
+        }
+        group.bench_function(BenchmarkId::new("serial", packing), |b| {
+            b.iter(|| stepper.step(&mut particles));
+        });
+        let mut particles = scene.particles.clone();
+        let mut threaded = ThreadedStepper::new(scene.domain, scene.physics, PARAMS, &particles, 2);
+        pool.install(|| {
+            for _ in 0..WARM_UP_STEPS {
+                threaded.step(&mut particles);
+            }
+        });
+        group.bench_function(BenchmarkId::new("rayon_2_threads", packing), |b| {
+            b.iter(|| pool.install(|| threaded.step(&mut particles)));
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, serial_kernels, backend_steps);
 criterion_main!(benches);

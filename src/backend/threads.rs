@@ -184,7 +184,8 @@ impl ThreadedStepper {
                 let n_bands = bands.len();
                 self.contacts.resize_with(n_bands, Vec::new);
                 self.handed_over.resize_with(n_bands, Vec::new);
-                self.schedules.resize_with(n_bands, ContactSchedule::default);
+                self.schedules
+                    .resize_with(n_bands, ContactSchedule::default);
                 // A disk in a band's first strip may also be in the contacts of the band
                 // below (its north strip), or of the last band (periodic wrap).
                 let layout = *self.grid.layout();

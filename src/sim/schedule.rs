@@ -93,7 +93,10 @@ mod tests {
         let mut handed_over = Vec::new();
         ContactSchedule::default().split(6, &mut contacts, &mut handed_over, |d| d == 5);
         assert_eq!(contacts, vec![contact(0, 1)]);
-        assert_eq!(handed_over, vec![contact(2, 3), contact(3, 4), contact(5, 4)]);
+        assert_eq!(
+            handed_over,
+            vec![contact(2, 3), contact(3, 4), contact(5, 4)]
+        );
     }
 
     #[test]
