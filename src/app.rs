@@ -5,16 +5,58 @@ use std::num::NonZeroUsize;
 use anyhow::{Context, bail};
 
 use crate::backend::{BackendSpec, RunOutcome, serial, threads};
-use crate::cli::{BackendName, Cli, Command, SimulateArgs};
+use crate::cli::{BackendName, Cli, Command, RunArgs, SimulateArgs};
 use crate::output::{write_atomically, write_state_csv};
+use crate::runner::RunOptions;
 use crate::scene_file;
 #[cfg(feature = "mpi")]
 use crate::summary::RunSummary;
+use crate::{manifest, results, runner};
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Simulate(args) => simulate(&args),
+        Command::Run(args) => run_study(&args),
+        Command::Results(args) => {
+            print!("{}", results::table(&results::load(&args.path)?));
+            Ok(())
+        }
     }
+}
+
+fn run_study(args: &RunArgs) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(&args.manifest).with_context(|| {
+        format!(
+            "cannot read manifest {}; check the path",
+            args.manifest.display()
+        )
+    })?;
+    let study = manifest::parse(&args.manifest, &text)?;
+    let options = RunOptions {
+        out: args.out.clone(),
+        resume: args.resume,
+        quiet: args.quiet,
+    };
+    let outcome = runner::run_study(&study, &text, &options)?;
+    println!(
+        "{} runs measured, {} failed{} → {}",
+        outcome.measured,
+        outcome.failed,
+        if outcome.kept > 0 {
+            format!(", {} kept from before", outcome.kept)
+        } else {
+            String::new()
+        },
+        outcome.results.display()
+    );
+    if outcome.failed > 0 {
+        bail!(
+            "{} run(s) failed; their rows in {} say why (status, error)",
+            outcome.failed,
+            outcome.results.display()
+        );
+    }
+    Ok(())
 }
 
 fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {

@@ -23,6 +23,31 @@ pub struct Cli {
 pub enum Command {
     /// Run one scene and print a summary of what happened.
     Simulate(SimulateArgs),
+    /// Run a scaling study from a manifest and record every run in Parquet.
+    Run(RunArgs),
+    /// Print a table of a study's recorded runs.
+    Results(ResultsArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// Experiment manifest (TOML), e.g. experiments/quick.toml.
+    pub manifest: PathBuf,
+    /// Results root; the study writes into OUT/<study name>/.
+    #[arg(long, value_name = "DIR", default_value = "results")]
+    pub out: PathBuf,
+    /// Continue the newest results file of this manifest and build, running only what is missing.
+    #[arg(long)]
+    pub resume: bool,
+    /// No progress bar or notes (automatic when stdout is not a terminal).
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct ResultsArgs {
+    /// A study's results folder (results/NAME/) or one results file.
+    pub path: PathBuf,
 }
 
 #[derive(Debug, Args)]

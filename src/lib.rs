@@ -6,7 +6,13 @@
 pub mod app;
 pub mod backend;
 pub mod cli;
+pub mod environment;
+pub mod manifest;
 pub mod output;
+pub mod process;
+pub mod records;
+pub mod results;
+pub mod runner;
 pub mod scene_file;
 pub mod sim;
 pub mod spec;

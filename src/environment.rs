@@ -1,0 +1,159 @@
+//! The machine and build a study ran on, captured once per study (Linux `/proc` and a
+//! few commands; anything unavailable is recorded as "unknown").
+
+use std::process::Command;
+
+use crate::backend::machine_cores;
+
+/// Facts recorded beside every measurement of a study.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Environment {
+    pub hostname: String,
+    pub cpu_model: String,
+    pub logical_cores: usize,
+    pub physical_cores: usize,
+    pub memory_bytes: u64,
+    pub os: String,
+    pub rustc: String,
+    /// "release" or "debug".
+    pub profile: String,
+    /// Cargo features compiled in, comma-separated ("" for none).
+    pub features: String,
+    pub git_commit: String,
+    pub git_dirty: bool,
+    /// The MPI library's first `mpirun --version` line; "none" without the mpi feature.
+    pub mpi_library: String,
+    /// 1-minute load average when the study started.
+    pub load_average_start: f64,
+}
+
+const UNKNOWN: &str = "unknown";
+
+impl Environment {
+    pub fn capture() -> Environment {
+        let cpuinfo = read("/proc/cpuinfo");
+        let cpu_model = cpuinfo
+            .lines()
+            .find_map(|line| line.strip_prefix("model name"))
+            .and_then(|rest| rest.split_once(':'))
+            .map_or_else(|| UNKNOWN.to_owned(), |(_, model)| model.trim().to_owned());
+        let features: Vec<&str> = [("mpi", cfg!(feature = "mpi"))]
+            .into_iter()
+            .filter_map(|(name, on)| on.then_some(name))
+            .collect();
+        let git_commit = command_line("git", &["rev-parse", "--short=12", "HEAD"]);
+        let git_dirty = Command::new("git")
+            .args(["status", "--porcelain", "--untracked-files=no"])
+            .output()
+            .is_ok_and(|out| out.status.success() && !out.stdout.is_empty());
+        Environment {
+            hostname: first_line(&read("/proc/sys/kernel/hostname")),
+            cpu_model,
+            logical_cores: machine_cores(),
+            physical_cores: physical_cores(&cpuinfo).unwrap_or_else(machine_cores),
+            memory_bytes: memory_bytes(&read("/proc/meminfo")).unwrap_or(0),
+            os: os_name(),
+            rustc: command_line("rustc", &["--version"]),
+            profile: if cfg!(debug_assertions) {
+                "debug"
+            } else {
+                "release"
+            }
+            .to_owned(),
+            features: features.join(","),
+            git_commit,
+            git_dirty,
+            mpi_library: if cfg!(feature = "mpi") {
+                command_line("mpirun", &["--version"])
+            } else {
+                "none".to_owned()
+            },
+            load_average_start: load_average(),
+        }
+    }
+}
+
+/// The 1-minute load average now (NaN where unknown).
+pub fn load_average() -> f64 {
+    read("/proc/loadavg")
+        .split_whitespace()
+        .next()
+        .and_then(|value| value.parse().ok())
+        .unwrap_or(f64::NAN)
+}
+
+fn read(path: &str) -> String {
+    std::fs::read_to_string(path).unwrap_or_default()
+}
+
+fn first_line(text: &str) -> String {
+    let line = text.lines().next().unwrap_or("").trim();
+    if line.is_empty() { UNKNOWN } else { line }.to_owned()
+}
+
+/// The first line a command prints, or "unknown" if it cannot run or fails.
+fn command_line(program: &str, args: &[&str]) -> String {
+    Command::new(program)
+        .args(args)
+        .output()
+        .ok()
+        .filter(|out| out.status.success())
+        .map_or_else(
+            || UNKNOWN.to_owned(),
+            |out| first_line(&String::from_utf8_lossy(&out.stdout)),
+        )
+}
+
+/// Distinct (physical id, core id) pairs in `/proc/cpuinfo`.
+fn physical_cores(cpuinfo: &str) -> Option<usize> {
+    let mut cores = std::collections::BTreeSet::new();
+    for block in cpuinfo.split("\n\n") {
+        let field = |name: &str| {
+            block
+                .lines()
+                .find(|line| line.starts_with(name))
+                .and_then(|line| line.split_once(':'))
+                .map(|(_, value)| value.trim().to_owned())
+        };
+        if let Some(core) = field("core id") {
+            cores.insert((field("physical id").unwrap_or_default(), core));
+        }
+    }
+    (!cores.is_empty()).then_some(cores.len())
+}
+
+fn memory_bytes(meminfo: &str) -> Option<u64> {
+    let line = meminfo.lines().find(|line| line.starts_with("MemTotal:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+fn os_name() -> String {
+    let release = read("/etc/os-release");
+    let pretty = release
+        .lines()
+        .find_map(|line| line.strip_prefix("PRETTY_NAME="))
+        .map(|name| name.trim_matches('"').to_owned())
+        .unwrap_or_else(|| UNKNOWN.to_owned());
+    format!(
+        "{pretty}, Linux {}",
+        first_line(&read("/proc/sys/kernel/osrelease"))
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cpuinfo_and_meminfo_are_read_as_the_kernel_writes_them() {
+        let cpuinfo = "processor\t: 0\nphysical id\t: 0\ncore id\t: 0\n\n\
+                       processor\t: 1\nphysical id\t: 0\ncore id\t: 0\n\n\
+                       processor\t: 2\nphysical id\t: 0\ncore id\t: 1\n";
+        assert_eq!(physical_cores(cpuinfo), Some(2));
+        assert_eq!(
+            memory_bytes("MemTotal:       24576 kB\nMemFree: 1 kB\n"),
+            Some(24576 * 1024)
+        );
+    }
+}

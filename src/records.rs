@@ -1,0 +1,358 @@
+//! Study records: one row per repetition, kept in Parquet through polars (the schema is
+//! documented in the README; bump [`SCHEMA_VERSION`] when a column changes meaning).
+
+use std::fs::File;
+use std::path::Path;
+
+use anyhow::{Context, bail};
+use polars::prelude::{
+    Column, DataFrame, ParquetCompression, ParquetReader, ParquetWriter, PolarsResult, SerReader,
+};
+
+use crate::environment::Environment;
+use crate::output::write_atomically;
+use crate::summary::RunSummary;
+
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// What became of one run.
+pub const STATUS_OK: &str = "ok";
+pub const STATUS_FAILED: &str = "failed";
+pub const STATUS_TIMED_OUT: &str = "timed_out";
+
+/// One repetition of one configuration. Failed runs keep their row, with NaN
+/// measurements, zero counts, an empty `state_hash` and the reason in `error`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Record {
+    pub study: String,
+    /// xxh3 of the manifest text: `--resume` only continues the same manifest.
+    pub manifest_hash: String,
+    /// Commit, dirty flag, profile and features: `--resume` only continues the same build.
+    pub build_id: String,
+    /// [`crate::manifest::Configuration::key`].
+    pub config_key: String,
+    pub scene: String,
+    pub repetition: u32,
+    pub status: String,
+    pub error: String,
+    pub backend: String,
+    pub threads: u64,
+    pub ranks: u64,
+    pub workers: u64,
+    pub n: u64,
+    pub steps: u64,
+    pub dt: f64,
+    pub packing: f64,
+    pub seed: Option<u64>,
+    pub boundary: String,
+    pub broadphase: String,
+    pub wall_s: f64,
+    pub setup_s: f64,
+    pub fps: f64,
+    pub particle_steps_per_s: f64,
+    pub integration_s: f64,
+    pub broad_phase_s: f64,
+    pub collision_s: f64,
+    pub communication_s: f64,
+    pub kinetic_energy_initial: f64,
+    pub kinetic_energy_final: f64,
+    pub momentum_initial_x: f64,
+    pub momentum_initial_y: f64,
+    pub momentum_final_x: f64,
+    pub momentum_final_y: f64,
+    pub pair_collisions: u64,
+    pub wall_collisions: u64,
+    pub max_overlap: f64,
+    pub state_hash: String,
+    pub oversubscribed: bool,
+    pub hostname: String,
+    pub cpu_model: String,
+    pub logical_cores: u64,
+    pub physical_cores: u64,
+    pub memory_bytes: u64,
+    pub os: String,
+    pub rustc: String,
+    pub profile: String,
+    pub features: String,
+    pub git_commit: String,
+    pub git_dirty: bool,
+    pub mpi_library: String,
+    pub load_average_start: f64,
+    /// 1-minute load average when this row was written.
+    pub load_average: f64,
+    /// UTC, RFC 3339: when the study started and when this run finished.
+    pub study_started_utc: String,
+    pub finished_utc: String,
+}
+
+/// The parts of a record that do not come from the run itself.
+#[derive(Clone, Debug)]
+pub struct RecordContext<'a> {
+    pub study: &'a str,
+    pub manifest_hash: &'a str,
+    pub build_id: &'a str,
+    pub config_key: &'a str,
+    pub scene: &'a str,
+    pub backend: &'a str,
+    pub workers: u64,
+    pub repetition: u32,
+    pub environment: &'a Environment,
+    pub study_started_utc: &'a str,
+}
+
+impl Record {
+    /// The row of a run that finished and printed `summary`.
+    pub fn measured(context: &RecordContext<'_>, summary: &RunSummary) -> Record {
+        let mut record = Record::blank(context, STATUS_OK, String::new());
+        record.threads = summary.threads as u64;
+        record.ranks = summary.ranks as u64;
+        record.workers = summary.workers as u64;
+        record.n = summary.n as u64;
+        record.steps = summary.steps;
+        record.dt = summary.dt;
+        record.packing = summary.packing;
+        record.seed = summary.seed;
+        record.boundary = summary.boundary.clone();
+        record.broadphase = summary.broadphase.clone();
+        record.wall_s = summary.wall_s;
+        record.setup_s = summary.setup_s;
+        record.fps = summary.fps;
+        record.particle_steps_per_s = summary.particle_steps_per_s;
+        record.integration_s = summary.integration_s;
+        record.broad_phase_s = summary.broad_phase_s;
+        record.collision_s = summary.collision_s;
+        record.communication_s = summary.communication_s;
+        record.kinetic_energy_initial = summary.kinetic_energy_initial;
+        record.kinetic_energy_final = summary.kinetic_energy_final;
+        [record.momentum_initial_x, record.momentum_initial_y] = summary.momentum_initial;
+        [record.momentum_final_x, record.momentum_final_y] = summary.momentum_final;
+        record.pair_collisions = summary.pair_collisions;
+        record.wall_collisions = summary.wall_collisions;
+        record.max_overlap = summary.max_overlap;
+        record.state_hash = summary.state_hash.clone();
+        record.oversubscribed = summary.oversubscribed;
+        record
+    }
+
+    /// The row of a run that failed or timed out.
+    pub fn failed(context: &RecordContext<'_>, status: &str, error: String) -> Record {
+        Record::blank(context, status, error)
+    }
+
+    fn blank(context: &RecordContext<'_>, status: &str, error: String) -> Record {
+        let env = context.environment;
+        let workers = context.workers;
+        let (threads, ranks) = match context.backend {
+            "rayon" => (workers, 1),
+            "mpi" => (1, workers),
+            _ => (1, 1),
+        };
+        Record {
+            study: context.study.to_owned(),
+            manifest_hash: context.manifest_hash.to_owned(),
+            build_id: context.build_id.to_owned(),
+            config_key: context.config_key.to_owned(),
+            scene: context.scene.to_owned(),
+            repetition: context.repetition,
+            status: status.to_owned(),
+            error,
+            backend: context.backend.to_owned(),
+            threads,
+            ranks,
+            workers,
+            n: 0,
+            steps: 0,
+            dt: f64::NAN,
+            packing: f64::NAN,
+            seed: None,
+            boundary: String::new(),
+            broadphase: String::new(),
+            wall_s: f64::NAN,
+            setup_s: f64::NAN,
+            fps: f64::NAN,
+            particle_steps_per_s: f64::NAN,
+            integration_s: f64::NAN,
+            broad_phase_s: f64::NAN,
+            collision_s: f64::NAN,
+            communication_s: f64::NAN,
+            kinetic_energy_initial: f64::NAN,
+            kinetic_energy_final: f64::NAN,
+            momentum_initial_x: f64::NAN,
+            momentum_initial_y: f64::NAN,
+            momentum_final_x: f64::NAN,
+            momentum_final_y: f64::NAN,
+            pair_collisions: 0,
+            wall_collisions: 0,
+            max_overlap: f64::NAN,
+            state_hash: String::new(),
+            oversubscribed: threads * ranks > env.logical_cores as u64,
+            hostname: env.hostname.clone(),
+            cpu_model: env.cpu_model.clone(),
+            logical_cores: env.logical_cores as u64,
+            physical_cores: env.physical_cores as u64,
+            memory_bytes: env.memory_bytes,
+            os: env.os.clone(),
+            rustc: env.rustc.clone(),
+            profile: env.profile.clone(),
+            features: env.features.clone(),
+            git_commit: env.git_commit.clone(),
+            git_dirty: env.git_dirty,
+            mpi_library: env.mpi_library.clone(),
+            load_average_start: env.load_average_start,
+            load_average: crate::environment::load_average(),
+            study_started_utc: context.study_started_utc.to_owned(),
+            finished_utc: utc_now(),
+        }
+    }
+}
+
+/// The current UTC time, RFC 3339 to the second.
+pub fn utc_now() -> String {
+    let seconds = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let (days, rest) = (seconds / 86_400, seconds % 86_400);
+    let (year, month, day) = civil_from_days(days as i64);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z",
+        rest / 3600,
+        rest % 3600 / 60,
+        rest % 60
+    )
+}
+
+/// Days since 1970-01-01 → (year, month, day), Howard Hinnant's algorithm.
+fn civil_from_days(days: i64) -> (i64, u32, u32) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    (year, month, day)
+}
+
+/// Applies the same code to every column: the one list of the schema.
+macro_rules! for_each_column {
+    ($apply:ident) => {
+        $apply!(
+            str: study, manifest_hash, build_id, config_key, scene, status, error, backend,
+                 boundary, broadphase, state_hash, hostname, cpu_model, os, rustc, profile,
+                 features, git_commit, mpi_library, study_started_utc, finished_utc;
+            u64: threads, ranks, workers, n, steps, pair_collisions, wall_collisions,
+                 logical_cores, physical_cores, memory_bytes;
+            u32: repetition;
+            f64: dt, packing, wall_s, setup_s, fps, particle_steps_per_s, integration_s,
+                 broad_phase_s, collision_s, communication_s, kinetic_energy_initial,
+                 kinetic_energy_final, momentum_initial_x, momentum_initial_y,
+                 momentum_final_x, momentum_final_y, max_overlap, load_average_start,
+                 load_average;
+            bool: oversubscribed, git_dirty;
+            opt_u64: seed
+        )
+    };
+}
+
+/// The records as a table, with `schema_version` first.
+pub fn to_frame(records: &[Record]) -> PolarsResult<DataFrame> {
+    macro_rules! build {
+        (str: $($s:ident),*; u64: $($u:ident),*; u32: $($r:ident),*; f64: $($f:ident),*;
+         bool: $($b:ident),*; opt_u64: $($o:ident),*) => {{
+            let mut columns = vec![Column::new(
+                "schema_version".into(),
+                vec![SCHEMA_VERSION; records.len()],
+            )];
+            $(columns.push(Column::new(stringify!($s).into(), records.iter().map(|r| r.$s.as_str()).collect::<Vec<_>>()));)*
+            $(columns.push(Column::new(stringify!($u).into(), records.iter().map(|r| r.$u).collect::<Vec<_>>()));)*
+            $(columns.push(Column::new(stringify!($r).into(), records.iter().map(|r| r.$r).collect::<Vec<_>>()));)*
+            $(columns.push(Column::new(stringify!($f).into(), records.iter().map(|r| r.$f).collect::<Vec<_>>()));)*
+            $(columns.push(Column::new(stringify!($b).into(), records.iter().map(|r| r.$b).collect::<Vec<_>>()));)*
+            $(columns.push(Column::new(stringify!($o).into(), records.iter().map(|r| r.$o).collect::<Vec<_>>()));)*
+            DataFrame::new_infer_height(columns)
+        }};
+    }
+    for_each_column!(build)
+}
+
+/// Rebuilds records from a table written by [`to_frame`]; names the first missing or
+/// mistyped column otherwise.
+pub fn from_frame(frame: &DataFrame) -> anyhow::Result<Vec<Record>> {
+    let version = frame
+        .column("schema_version")
+        .context("no `schema_version` column: not a collide results file")?
+        .u32()
+        .context("`schema_version` is not an unsigned integer: not a collide results file")?
+        .get(0);
+    if let Some(version) = version
+        && version != SCHEMA_VERSION
+    {
+        bail!(
+            "results schema version {version}, but this collide reads version {SCHEMA_VERSION}; \
+             use the collide that wrote them, or re-run the study"
+        );
+    }
+    let column = |name: &str| {
+        frame.column(name).with_context(|| {
+            format!("no `{name}` column: not a collide results file, or a damaged one")
+        })
+    };
+    let rows = frame.height();
+    macro_rules! read {
+        (str: $($s:ident),*; u64: $($u:ident),*; u32: $($r:ident),*; f64: $($f:ident),*;
+         bool: $($b:ident),*; opt_u64: $($o:ident),*) => {{
+            $(let $s = column(stringify!($s))?.str()?;)*
+            $(let $u = column(stringify!($u))?.u64()?;)*
+            $(let $r = column(stringify!($r))?.u32()?;)*
+            $(let $f = column(stringify!($f))?.f64()?;)*
+            $(let $b = column(stringify!($b))?.bool()?;)*
+            $(let $o = column(stringify!($o))?.u64()?;)*
+            (0..rows)
+                .map(|i| Record {
+                    $($s: $s.get(i).unwrap_or_default().to_owned(),)*
+                    $($u: $u.get(i).unwrap_or_default(),)*
+                    $($r: $r.get(i).unwrap_or_default(),)*
+                    $($f: $f.get(i).unwrap_or(f64::NAN),)*
+                    $($b: $b.get(i).unwrap_or_default(),)*
+                    $($o: $o.get(i),)*
+                })
+                .collect()
+        }};
+    }
+    Ok(for_each_column!(read))
+}
+
+/// Writes the records to `path` atomically (Parquet, zstd).
+pub fn write(path: &Path, records: &[Record]) -> anyhow::Result<()> {
+    let mut frame = to_frame(records)?;
+    write_atomically(path, |out| {
+        ParquetWriter::new(out)
+            .with_compression(ParquetCompression::Zstd(None))
+            .finish(&mut frame)
+            .map(|_| ())
+            .map_err(std::io::Error::other)
+    })
+}
+
+/// Reads the records of one results file, saying which file and why if it cannot.
+pub fn read(path: &Path) -> anyhow::Result<Vec<Record>> {
+    let file = File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
+    let frame = ParquetReader::new(file)
+        .finish()
+        .with_context(|| format!("{} is not a readable Parquet file", path.display()))?;
+    from_frame(&frame).with_context(|| format!("{}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn utc_dates_follow_the_civil_calendar() {
+        assert_eq!(civil_from_days(0), (1970, 1, 1));
+        assert_eq!(civil_from_days(19_782), (2024, 2, 29));
+        assert_eq!(civil_from_days(20_414), (2025, 11, 22));
+    }
+}

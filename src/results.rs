@@ -1,0 +1,138 @@
+//! `collide results`: a terminal table of a study's records — median wall time and its
+//! spread per configuration, and whether the backends agreed on `state_hash`.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+
+use crate::records::{self, Record, STATUS_OK};
+
+/// Every record under `path` (a results file, or a study folder of them).
+pub fn load(path: &Path) -> anyhow::Result<Vec<Record>> {
+    let files: Vec<PathBuf> = if path.is_dir() {
+        let mut files: Vec<PathBuf> = std::fs::read_dir(path)
+            .with_context(|| format!("cannot list {}", path.display()))?
+            .filter_map(|entry| entry.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|ext| ext == "parquet"))
+            .collect();
+        files.sort();
+        files
+    } else {
+        vec![path.to_owned()]
+    };
+    if files.is_empty() {
+        bail!(
+            "no .parquet results in {}; run a study first (`collide run experiments/NAME.toml`)",
+            path.display()
+        );
+    }
+    let mut all = Vec::new();
+    for file in files {
+        all.extend(records::read(&file)?);
+    }
+    Ok(all)
+}
+
+/// Median of a non-empty slice.
+pub fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let mid = values.len() / 2;
+    if values.len() % 2 == 1 {
+        values[mid]
+    } else {
+        0.5 * (values[mid - 1] + values[mid])
+    }
+}
+
+/// The table, one line per configuration in first-seen order, then the hash check.
+pub fn table(records: &[Record]) -> String {
+    let mut order: Vec<&str> = Vec::new();
+    let mut groups: BTreeMap<&str, Vec<&Record>> = BTreeMap::new();
+    for record in records {
+        let group = groups.entry(&record.config_key).or_default();
+        if group.is_empty() {
+            order.push(&record.config_key);
+        }
+        group.push(record);
+    }
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "{:<9} {:>7} {:>9} {:>7} {:>12} {:>21} {:>4} {:>6}  {}",
+        "backend", "workers", "n", "steps", "median s", "min–max s", "reps", "failed", "scene"
+    );
+    for key in &order {
+        let group = &groups[key];
+        let ok: Vec<&&Record> = group.iter().filter(|r| r.status == STATUS_OK).collect();
+        let mut times: Vec<f64> = ok.iter().map(|r| r.wall_s).collect();
+        let first = group[0];
+        let (median_s, spread) = if times.is_empty() {
+            ("—".to_owned(), "—".to_owned())
+        } else {
+            let median_s = median(&mut times);
+            (
+                format!("{median_s:.4}"),
+                format!("{:.4}–{:.4}", times[0], times[times.len() - 1]),
+            )
+        };
+        let shown = ok.first().copied().copied().unwrap_or(first);
+        let oversubscribed = if shown.oversubscribed {
+            " (oversubscribed)"
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            out,
+            "{:<9} {:>7} {:>9} {:>7} {:>12} {:>21} {:>4} {:>6}  {}{oversubscribed}",
+            first.backend,
+            first.workers,
+            shown.n,
+            shown.steps,
+            median_s,
+            spread,
+            ok.len(),
+            group.len() - ok.len(),
+            first.scene
+        );
+    }
+    let _ = write!(out, "{}", hash_agreement(records));
+    out
+}
+
+/// One line per physical setup (scene, n, steps, dt, seed, packing) measured by more than
+/// one configuration: whether every successful run gave the same final state.
+fn hash_agreement(records: &[Record]) -> String {
+    let mut setups: BTreeMap<String, BTreeMap<&str, Vec<String>>> = BTreeMap::new();
+    for record in records.iter().filter(|r| r.status == STATUS_OK) {
+        let setup = format!(
+            "{} n={} steps={} dt={} seed={:?} packing={:.4} broadphase={}",
+            record.scene,
+            record.n,
+            record.steps,
+            record.dt,
+            record.seed,
+            record.packing,
+            record.broadphase
+        );
+        setups
+            .entry(setup)
+            .or_default()
+            .entry(&record.state_hash)
+            .or_default()
+            .push(format!("{} {}", record.backend, record.workers));
+    }
+    let mut out = String::new();
+    for (setup, hashes) in &setups {
+        if hashes.len() == 1 {
+            let _ = writeln!(out, "state_hash: all runs agree for {setup}");
+        } else {
+            let _ = writeln!(out, "state_hash: runs DISAGREE for {setup}:");
+            for (hash, who) in hashes {
+                let _ = writeln!(out, "  {hash}: {}", who.join(", "));
+            }
+        }
+    }
+    out
+}

@@ -1,0 +1,294 @@
+//! Runs a study: every configuration in a fresh `collide simulate` process (MPI through
+//! its launcher), warm-ups first, then the repetitions interleaved across
+//! configurations so that drift of the machine hits all of them alike. Each finished
+//! repetition is written at once (the whole file, atomically), so a crash, a kill or
+//! Ctrl-C loses nothing already measured, and `--resume` runs only what is missing.
+
+use std::collections::BTreeSet;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{Context, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::cli::BackendName;
+use crate::environment::Environment;
+use crate::manifest::{Configuration, SceneInput, Study};
+use crate::output::write_atomically;
+use crate::process::{Ended, run_with_timeout, tail};
+use crate::records::{self, Record, RecordContext, STATUS_FAILED, STATUS_OK, STATUS_TIMED_OUT};
+use crate::summary::RunSummary;
+
+/// How to run a study.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    /// Results root: the study writes into `out/<study name>/`.
+    pub out: PathBuf,
+    /// Continue the newest results file of the same manifest and build.
+    pub resume: bool,
+    /// No progress bar or notes (also when stdout is not a terminal).
+    pub quiet: bool,
+}
+
+/// What a study run left behind.
+#[derive(Clone, Debug)]
+pub struct StudyOutcome {
+    pub results: PathBuf,
+    pub measured: usize,
+    pub failed: usize,
+    /// Runs already in the file when resuming.
+    pub kept: usize,
+}
+
+pub fn run_study(
+    study: &Study,
+    manifest_text: &str,
+    options: &RunOptions,
+) -> anyhow::Result<StudyOutcome> {
+    let quiet = options.quiet || !std::io::stdout().is_terminal();
+    let note = |text: &str| {
+        if !quiet {
+            println!("{text}");
+        }
+    };
+    let environment = Environment::capture();
+    let dir = options.out.join(&study.name);
+    std::fs::create_dir_all(&dir).with_context(|| {
+        format!(
+            "cannot create the results folder {}; check the path or choose another with --out",
+            dir.display()
+        )
+    })?;
+    let manifest_hash = format!(
+        "{:016x}",
+        xxhash_rust::xxh3::xxh3_64(manifest_text.as_bytes())
+    );
+    let build_id = format!(
+        "{}{}-{}-[{}]",
+        environment.git_commit,
+        if environment.git_dirty { "-dirty" } else { "" },
+        environment.profile,
+        environment.features
+    );
+    let (results, mut rows) = match options.resume {
+        true => match resumable(&dir, &manifest_hash, &build_id)? {
+            Some(found) => found,
+            None => bail!(
+                "nothing to resume in {}: no results file of this manifest and build; run without --resume",
+                dir.display()
+            ),
+        },
+        false => (new_results_path(&dir, &environment), Vec::new()),
+    };
+    let kept = rows.len();
+    let done: BTreeSet<(String, u32)> = rows
+        .iter()
+        .filter(|r| r.status == STATUS_OK)
+        .map(|r| (r.config_key.clone(), r.repetition))
+        .collect();
+    rows.retain(|r| r.status == STATUS_OK);
+
+    let mut configurations: Vec<&Configuration> = study.configurations.iter().collect();
+    if !cfg!(feature = "mpi") {
+        let before = configurations.len();
+        configurations.retain(|c| c.backend != BackendName::Mpi);
+        if configurations.len() < before {
+            note(&format!(
+                "note: skipping {} MPI configuration(s): this collide was built without `--features mpi`",
+                before - configurations.len()
+            ));
+        }
+    }
+    for configuration in &configurations {
+        if configuration.backend != BackendName::Serial
+            && configuration.workers > environment.logical_cores
+        {
+            note(&format!(
+                "note: {} is oversubscribed ({} workers on {} logical cores); its rows say so",
+                configuration.key(),
+                configuration.workers,
+                environment.logical_cores
+            ));
+        }
+    }
+    let scene_files = materialize_scenes(&dir, &configurations)?;
+    let todo: Vec<(u32, usize)> = (0..study.repetitions)
+        .flat_map(|rep| (0..configurations.len()).map(move |c| (rep, c)))
+        .filter(|&(rep, c)| !done.contains(&(configurations[c].key(), rep)))
+        .collect();
+    let warm: BTreeSet<usize> = todo.iter().map(|&(_, c)| c).collect();
+    let total = (warm.len() * study.warmups as usize + todo.len()) as u64;
+    let progress = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(total)
+    };
+    progress.set_style(
+        ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} runs, {elapsed} gone, ~{eta} left  {msg}",
+        )
+        .expect("a valid progress template"),
+    );
+    note(&format!(
+        "study {}: {} configurations × {} repetitions (+{} warm-up each) → {}",
+        study.name,
+        configurations.len(),
+        study.repetitions,
+        study.warmups,
+        results.display()
+    ));
+
+    let exe = std::env::current_exe().context("cannot find this program's path")?;
+    let started_utc = records::utc_now();
+    let run = |configuration: &Configuration, scene: &Path| {
+        let mut command = Command::new(&exe);
+        command
+            .arg("simulate")
+            .arg(scene)
+            .args(configuration.simulate_args());
+        run_with_timeout(command, study.timeout)
+    };
+    for &c in &warm {
+        for _ in 0..study.warmups {
+            progress.set_message(format!("warm-up {}", configurations[c].key()));
+            // A warm-up that fails will fail again when measured, and be recorded then.
+            let _ = run(configurations[c], &scene_files[c]);
+            progress.inc(1);
+        }
+    }
+    let (mut measured, mut failed) = (0, 0);
+    for &(rep, c) in &todo {
+        let configuration = configurations[c];
+        let key = configuration.key();
+        progress.set_message(format!("rep {rep}: {key}"));
+        let context = RecordContext {
+            study: &study.name,
+            manifest_hash: &manifest_hash,
+            build_id: &build_id,
+            config_key: &key,
+            scene: &configuration.scene,
+            backend: configuration.backend_name(),
+            workers: configuration.workers as u64,
+            repetition: rep,
+            environment: &environment,
+            study_started_utc: &started_utc,
+        };
+        let record = match run(configuration, &scene_files[c]) {
+            Err(e) => Record::failed(
+                &context,
+                STATUS_FAILED,
+                format!("cannot start collide: {e}"),
+            ),
+            Ok(Ended::TimedOut { stderr }) => Record::failed(
+                &context,
+                STATUS_TIMED_OUT,
+                format!(
+                    "killed after {} s{}",
+                    study.timeout.as_secs_f64(),
+                    tail("its output", &stderr)
+                ),
+            ),
+            Ok(Ended::Exited {
+                status,
+                stdout,
+                stderr,
+            }) => {
+                let summary = stdout
+                    .lines()
+                    .last()
+                    .and_then(|line| serde_json::from_str::<RunSummary>(line).ok());
+                match summary {
+                    Some(summary) if status.success() => Record::measured(&context, &summary),
+                    _ => Record::failed(
+                        &context,
+                        STATUS_FAILED,
+                        format!("{status}{}", tail("its output", &stderr)),
+                    ),
+                }
+            }
+        };
+        if record.status == STATUS_OK {
+            measured += 1;
+        } else {
+            failed += 1;
+            progress.suspend(|| eprintln!("run failed: {key}: {}", record.error));
+        }
+        rows.push(record);
+        records::write(&results, &rows)?;
+        progress.inc(1);
+    }
+    progress.finish_and_clear();
+    Ok(StudyOutcome {
+        results,
+        measured,
+        failed,
+        kept,
+    })
+}
+
+/// `<dir>/<UTC timestamp>-<host>-<commit>.parquet`.
+fn new_results_path(dir: &Path, environment: &Environment) -> PathBuf {
+    let stamp: String = records::utc_now()
+        .chars()
+        .filter(|c| c.is_ascii_alphanumeric())
+        .collect();
+    let host: String = environment
+        .hostname
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    dir.join(format!("{stamp}-{host}-{}.parquet", environment.git_commit))
+}
+
+/// The newest results file in `dir` written by the same manifest and build, with its rows.
+fn resumable(
+    dir: &Path,
+    manifest_hash: &str,
+    build_id: &str,
+) -> anyhow::Result<Option<(PathBuf, Vec<Record>)>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
+        .filter_map(|entry| entry.ok().map(|e| e.path()))
+        .filter(|path| path.extension().is_some_and(|ext| ext == "parquet"))
+        .collect();
+    files.sort();
+    for path in files.into_iter().rev() {
+        let rows = records::read(&path)?;
+        if rows
+            .first()
+            .is_some_and(|r| r.manifest_hash == manifest_hash && r.build_id == build_id)
+        {
+            return Ok(Some((path, rows)));
+        }
+    }
+    Ok(None)
+}
+
+/// The scene file each configuration's process reads: its own file, or its inline scene
+/// written to `<dir>/scenes/<scene>.toml` (kept beside the results it produced).
+fn materialize_scenes(
+    dir: &Path,
+    configurations: &[&Configuration],
+) -> anyhow::Result<Vec<PathBuf>> {
+    let scenes = dir.join("scenes");
+    configurations
+        .iter()
+        .map(|configuration| match &configuration.input {
+            SceneInput::File(path) => Ok(path.clone()),
+            SceneInput::Inline(text) => {
+                std::fs::create_dir_all(&scenes)
+                    .with_context(|| format!("cannot create {}", scenes.display()))?;
+                let path = scenes.join(format!("{}.toml", configuration.scene));
+                write_atomically(&path, |out| out.write_all(text.as_bytes()))?;
+                Ok(path)
+            }
+        })
+        .collect()
+}
