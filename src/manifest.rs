@@ -127,11 +127,6 @@ impl Configuration {
 
 #[derive(Debug, thiserror::Error)]
 pub enum ManifestError {
-    #[error("cannot read manifest {path}: {source}; check the path")]
-    Read {
-        path: PathBuf,
-        source: std::io::Error,
-    },
     #[error("{location}: {message}")]
     Invalid { location: String, message: String },
 }
@@ -183,15 +178,6 @@ struct RawBackends {
     rayon: Vec<i64>,
     #[serde(default)]
     mpi: Vec<i64>,
-}
-
-/// Reads and validates a manifest.
-pub fn load(path: &Path) -> Result<Study, ManifestError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ManifestError::Read {
-        path: path.to_owned(),
-        source,
-    })?;
-    parse(path, &text)
 }
 
 /// Validates manifest text; scene files are found relative to `path`'s folder.
@@ -506,4 +492,63 @@ fn describe(o: &Overrides) -> String {
 
 fn line_of(text: &str, offset: usize) -> usize {
     text[..offset.min(text.len())].matches('\n').count() + 1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const INLINE: &str = "[[scenes]]\nname = \"gas\"\n[scenes.scene]\nn = 100\npacking = 0.1\n\
+                          [scenes.method]\ndt = 0.1\nsteps = 10\n";
+
+    fn study(head: &str) -> Study {
+        parse(
+            Path::new("m.toml"),
+            &format!("name = \"m\"\n{head}\n{INLINE}"),
+        )
+        .unwrap()
+    }
+
+    fn points(study: &Study) -> Vec<(Option<i64>, Option<f64>, String, usize)> {
+        study
+            .configurations
+            .iter()
+            .map(|c| {
+                (
+                    c.overrides.n,
+                    c.overrides.packing,
+                    c.backend_name().to_owned(),
+                    c.workers,
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn sweeps_multiply_unless_zipped_and_backends_multiply_them_all() {
+        let product = study(
+            "[sweep]\nn = [100, 200]\npacking = [0.1, 0.2]\n[backends]\nserial = true\nrayon = [2]\n",
+        );
+        assert_eq!(product.configurations.len(), 8);
+        let zipped = study(
+            "[sweep]\nn = [100, 200]\npacking = [0.1, 0.2]\nzip = [\"n\", \"packing\"]\n[backends]\nserial = true\n",
+        );
+        assert_eq!(
+            points(&zipped),
+            [
+                (Some(100), Some(0.1), "serial".into(), 1),
+                (Some(200), Some(0.2), "serial".into(), 1)
+            ]
+        );
+    }
+
+    #[test]
+    fn weak_scaling_multiplies_n_by_the_workers() {
+        let weak = study("scaling = \"weak\"\n[backends]\nserial = true\nrayon = [2, 4]\n");
+        let n: Vec<Option<i64>> = weak.configurations.iter().map(|c| c.overrides.n).collect();
+        assert_eq!(n, [Some(100), Some(200), Some(400)]);
+        let args = weak.configurations[2].simulate_args();
+        assert!(args.windows(2).any(|w| w == ["--n", "400"]), "{args:?}");
+        assert!(args.windows(2).any(|w| w == ["--threads", "4"]), "{args:?}");
+    }
 }

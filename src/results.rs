@@ -60,8 +60,8 @@ pub fn table(records: &[Record]) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "{:<9} {:>7} {:>9} {:>7} {:>12} {:>21} {:>4} {:>6}  {}",
-        "backend", "workers", "n", "steps", "median s", "min–max s", "reps", "failed", "scene"
+        "{:<9} {:>7} {:>9} {:>7} {:>12} {:>21} {:>4} {:>6}  scene",
+        "backend", "workers", "n", "steps", "median s", "min–max s", "reps", "failed"
     );
     for key in &order {
         let group = &groups[key];

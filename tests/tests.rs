@@ -5,3 +5,4 @@ mod cli;
 #[cfg(feature = "mpi")]
 mod mpi;
 mod physics;
+mod study;

@@ -1,0 +1,270 @@
+//! `collide run` and `collide results`: manifests, the runner, Parquet records, resume,
+//! and bad input.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use collide::environment::Environment;
+use collide::records::{self, Record, RecordContext, STATUS_TIMED_OUT};
+use collide::summary::RunSummary;
+
+use crate::cli::{collide, scene_file};
+
+const SCENE: &str = "[scene]\nn = 200\npacking = 0.1\nseed = 3\n[method]\ndt = 0.1\nsteps = 20\n";
+
+/// A manifest over `scene.toml` (written beside it) with the given extra text.
+fn manifest(dir: &Path, body: &str) -> String {
+    scene_file(dir, "scene.toml", SCENE);
+    let text = format!("name = \"tiny\"\n{body}\n[[scenes]]\nfile = \"scene.toml\"\n");
+    scene_file(dir, "tiny.toml", &text)
+        .to_str()
+        .unwrap()
+        .to_owned()
+}
+
+const BACKENDS: &str = "[backends]\nserial = true\nrayon = [2]\n";
+
+fn stderr_of(args: &[&str]) -> String {
+    let started = Instant::now();
+    let out = collide(args);
+    assert!(
+        started.elapsed() < Duration::from_secs(5),
+        "{args:?} was slow"
+    );
+    assert!(!out.status.success(), "{args:?} was accepted");
+    String::from_utf8(out.stderr).unwrap()
+}
+
+#[test]
+fn bad_manifests_name_the_line_the_field_and_the_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases: &[(&str, &[&str])] = &[
+        (
+            "colour = 1\n[backends]\nserial = true\n",
+            &[":2:", "colour"],
+        ),
+        (
+            "[sweep]\nn = []\n[backends]\nserial = true\n",
+            &["sweep.n", "empty"],
+        ),
+        (
+            "[backends]\nrayon = [2, 2]\n",
+            &["appears twice", "workers=2"],
+        ),
+        (
+            "[sweep]\npacking = [0.9]\n[backends]\nserial = true\n",
+            &["packing", "lattice"],
+        ),
+        (
+            "[sweep]\nn = [1, 2]\nsteps = [5]\nzip = [\"n\", \"steps\"]\n[backends]\nserial = true\n",
+            &["zip", "same length"],
+        ),
+        (
+            "[backends]\nrayon = [0]\n",
+            &["backends.rayon", "at least 1"],
+        ),
+        ("[backends]\n", &["runs nothing"]),
+    ];
+    for (body, fragments) in cases {
+        let path = manifest(dir.path(), body);
+        let stderr = stderr_of(&["run", &path, "--out", dir.path().to_str().unwrap()]);
+        assert!(stderr.contains("tiny.toml:"), "{body}: {stderr}");
+        for fragment in *fragments {
+            assert!(
+                stderr.contains(fragment),
+                "{body}: `{fragment}` not in {stderr}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_study_records_every_repetition_and_resume_runs_only_what_is_missing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    let path = manifest(
+        dir.path(),
+        &format!("repetitions = 2\nwarmups = 0\n{BACKENDS}"),
+    );
+    let run = |extra: &[&str]| {
+        collide(
+            &[
+                &["run", path.as_str(), "--out", out.to_str().unwrap()],
+                extra,
+            ]
+            .concat(),
+        )
+    };
+    assert!(run(&[]).status.success());
+    let files: Vec<_> = std::fs::read_dir(out.join("tiny"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    let parquet: Vec<_> = files
+        .iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "parquet"))
+        .collect();
+    assert_eq!(parquet.len(), 1, "{files:?}");
+    let rows = records::read(parquet[0]).unwrap();
+    assert_eq!(rows.len(), 4);
+    assert!(
+        rows.iter()
+            .all(|r| r.status == "ok" && r.study == "tiny" && r.n == 200)
+    );
+    assert!(rows.iter().all(|r| r.state_hash == rows[0].state_hash));
+    let mut reps: Vec<(String, u32)> = rows
+        .iter()
+        .map(|r| (r.backend.clone(), r.repetition))
+        .collect();
+    reps.sort();
+    assert_eq!(
+        reps,
+        [
+            ("rayon".into(), 0),
+            ("rayon".into(), 1),
+            ("serial".into(), 0),
+            ("serial".into(), 1)
+        ]
+    );
+
+    // As if the study had been killed after its first run: resume runs the other three.
+    records::write(parquet[0], &rows[..1]).unwrap();
+    let resumed = run(&["--resume"]);
+    let stdout = String::from_utf8(resumed.stdout).unwrap();
+    assert!(
+        resumed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
+    assert!(
+        stdout.contains("3 runs measured") && stdout.contains("1 kept"),
+        "{stdout}"
+    );
+    assert_eq!(records::read(parquet[0]).unwrap().len(), 4);
+
+    let table = collide(&["results", out.join("tiny").to_str().unwrap()]);
+    let table = String::from_utf8(table.stdout).unwrap();
+    assert!(
+        table.contains("serial") && table.contains("rayon"),
+        "{table}"
+    );
+    assert!(table.contains("all runs agree"), "{table}");
+}
+
+#[test]
+fn a_run_over_its_timeout_is_recorded_as_timed_out_and_fails_the_study() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    let path = manifest(
+        dir.path(),
+        // Ten million steps would take about a minute; the timeout kills the run at 0.2 s.
+        "repetitions = 1\nwarmups = 0\ntimeout_s = 0.2\n[sweep]\nsteps = [10000000]\n\
+         [backends]\nserial = true\n",
+    );
+    let result = collide(&["run", &path, "--out", out.to_str().unwrap()]);
+    assert!(!result.status.success());
+    let stderr = String::from_utf8(result.stderr).unwrap();
+    assert!(stderr.contains("1 run(s) failed"), "{stderr}");
+    let file = std::fs::read_dir(out.join("tiny"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "parquet"))
+        .unwrap();
+    let rows = records::read(&file).unwrap();
+    assert_eq!(rows[0].status, STATUS_TIMED_OUT);
+    assert!(rows[0].wall_s.is_nan() && rows[0].state_hash.is_empty());
+}
+
+#[test]
+fn an_unwritable_results_folder_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = manifest(dir.path(), BACKENDS);
+    let blocker = scene_file(dir.path(), "not-a-folder", "");
+    let stderr = stderr_of(&["run", &path, "--out", blocker.to_str().unwrap()]);
+    assert!(
+        stderr.contains("cannot create the results folder") && stderr.contains("--out"),
+        "{stderr}"
+    );
+}
+
+fn sample_records() -> Vec<Record> {
+    let environment = Environment::capture();
+    let context = RecordContext {
+        study: "s",
+        manifest_hash: "m",
+        build_id: "b",
+        config_key: "k",
+        scene: "seed",
+        backend: "rayon",
+        workers: 2,
+        repetition: 1,
+        environment: &environment,
+        study_started_utc: "2026-11-22T00:00:00Z",
+    };
+    let out = collide(&[
+        "simulate",
+        "experiments/scenes/seed-1000.toml",
+        "--json",
+        "--steps",
+        "10",
+    ]);
+    let summary: RunSummary = serde_json::from_str(
+        String::from_utf8(out.stdout)
+            .unwrap()
+            .lines()
+            .last()
+            .unwrap(),
+    )
+    .unwrap();
+    vec![
+        Record::measured(&context, &summary),
+        Record::failed(&context, STATUS_TIMED_OUT, "killed after 1 s".into()),
+    ]
+}
+
+#[test]
+fn records_round_trip_through_parquet_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("r.parquet");
+    let written = sample_records();
+    records::write(&path, &written).unwrap();
+    let read = records::read(&path).unwrap();
+    // Debug text compares NaN equal to NaN and every other value exactly.
+    assert_eq!(format!("{read:?}"), format!("{written:?}"));
+}
+
+#[test]
+fn corrupt_foreign_and_old_results_are_refused_with_the_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let garbage = scene_file(dir.path(), "garbage.parquet", "not parquet at all");
+    let stderr = stderr_of(&["results", garbage.to_str().unwrap()]);
+    assert!(stderr.contains("not a readable Parquet file"), "{stderr}");
+
+    let mut frame = records::to_frame(&sample_records()).unwrap();
+    frame.drop_in_place("state_hash").unwrap();
+    let foreign = dir.path().join("foreign.parquet");
+    let file = std::fs::File::create(&foreign).unwrap();
+    polars::prelude::ParquetWriter::new(file)
+        .finish(&mut frame)
+        .unwrap();
+    let stderr = stderr_of(&["results", foreign.to_str().unwrap()]);
+    assert!(stderr.contains("no `state_hash` column"), "{stderr}");
+
+    let mut frame = records::to_frame(&sample_records()).unwrap();
+    let old = polars::prelude::Column::new("schema_version".into(), vec![0u32; frame.height()]);
+    frame.with_column(old).unwrap();
+    let older = dir.path().join("older.parquet");
+    let file = std::fs::File::create(&older).unwrap();
+    polars::prelude::ParquetWriter::new(file)
+        .finish(&mut frame)
+        .unwrap();
+    let stderr = stderr_of(&["results", older.to_str().unwrap()]);
+    assert!(
+        stderr.contains("schema version 0") && stderr.contains("re-run"),
+        "{stderr}"
+    );
+
+    let empty = tempfile::tempdir().unwrap();
+    let stderr = stderr_of(&["results", empty.path().to_str().unwrap()]);
+    assert!(stderr.contains("no .parquet results"), "{stderr}");
+}
