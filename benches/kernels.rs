@@ -8,8 +8,8 @@
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 
 use collide::backend::threads::ThreadedStepper;
-use collide::sim::scene::{Extent, GasSpec, MassRule, Placement, RadiusDistribution};
-use collide::sim::{Boundary, Broadphase, Physics, Scene, StepParams, Stepper};
+use collide::sim::scene::GasSpec;
+use collide::sim::{Broadphase, Particles, Scene, StepParams, Stepper};
 
 /// r = 1 and v_rms = 1 stepped with dt = 0.1, so v_rms·dt = 0.1·r.
 const PARAMS: StepParams = StepParams {
@@ -20,22 +20,21 @@ const WARM_UP_STEPS: usize = 50;
 
 fn gas(n_particles: usize, packing: f64) -> Scene {
     GasSpec {
-        n_particles,
-        extent: Extent::Packing(packing),
-        radius: RadiusDistribution::Fixed(1.0),
-        mass: MassRule::Fixed(1.0),
-        speed_rms: 1.0,
-        placement: Placement::Random,
-        boundary: Boundary::Walls,
-        physics: Physics {
-            restitution: 1.0,
-            wall_restitution: 1.0,
-            gravity: None,
-        },
         seed: 42,
+        ..GasSpec::unit(n_particles, packing)
     }
     .build()
     .expect("packings below jamming place")
+}
+
+/// The scene's disks after the warm-up steps of a serial stepper, and that stepper.
+fn warmed_up_serial(scene: &Scene) -> (Particles, Stepper) {
+    let mut particles = scene.particles.clone();
+    let mut stepper = Stepper::for_scene(scene, PARAMS);
+    for _ in 0..WARM_UP_STEPS {
+        stepper.step(&mut particles);
+    }
+    (particles, stepper)
 }
 
 fn serial_kernels(c: &mut Criterion) {
@@ -44,12 +43,7 @@ fn serial_kernels(c: &mut Criterion) {
     group.throughput(Throughput::Elements(N as u64));
     group.sample_size(30);
     for packing in [0.05, 0.3] {
-        let scene = gas(N, packing);
-        let mut particles = scene.particles.clone();
-        let mut stepper = Stepper::for_scene(&scene, PARAMS);
-        for _ in 0..WARM_UP_STEPS {
-            stepper.step(&mut particles);
-        }
+        let (mut particles, mut stepper) = warmed_up_serial(&gas(N, packing));
         group.bench_function(BenchmarkId::new("step", packing), |b| {
             b.iter(|| stepper.step(&mut particles));
         });
@@ -78,11 +72,7 @@ fn backend_steps(c: &mut Criterion) {
         .expect("a pool of 2 threads");
     for packing in [0.05, 0.3] {
         let scene = gas(N, packing);
-        let mut particles = scene.particles.clone();
-        let mut stepper = Stepper::for_scene(&scene, PARAMS);
-        for _ in 0..WARM_UP_STEPS {
-            stepper.step(&mut particles);
-        }
+        let (mut particles, mut stepper) = warmed_up_serial(&scene);
         group.bench_function(BenchmarkId::new("serial", packing), |b| {
             b.iter(|| stepper.step(&mut particles));
         });

@@ -2,7 +2,7 @@
 //! documented in the README; bump [`SCHEMA_VERSION`] when a column changes meaning).
 
 use std::fs::File;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use polars::prelude::{
@@ -334,6 +334,18 @@ pub fn write(path: &Path, records: &[Record]) -> anyhow::Result<()> {
             .map(|_| ())
             .map_err(std::io::Error::other)
     })
+}
+
+/// The `.parquet` files in `dir`, sorted by name (oldest first: names start with the
+/// UTC time they were started).
+pub fn files_in(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
+        .filter_map(|entry| entry.ok().map(|e| e.path()))
+        .filter(|path| path.extension().is_some_and(|ext| ext == "parquet"))
+        .collect();
+    files.sort();
+    Ok(files)
 }
 
 /// Reads the records of one results file, saying which file and why if it cannot.

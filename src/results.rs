@@ -5,20 +5,14 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
+use anyhow::bail;
 
 use crate::records::{self, Record, STATUS_OK};
 
 /// Every record under `path` (a results file, or a study folder of them).
 pub fn load(path: &Path) -> anyhow::Result<Vec<Record>> {
     let files: Vec<PathBuf> = if path.is_dir() {
-        let mut files: Vec<PathBuf> = std::fs::read_dir(path)
-            .with_context(|| format!("cannot list {}", path.display()))?
-            .filter_map(|entry| entry.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|ext| ext == "parquet"))
-            .collect();
-        files.sort();
-        files
+        records::files_in(path)?
     } else {
         vec![path.to_owned()]
     };

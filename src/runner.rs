@@ -253,13 +253,7 @@ fn resumable(
     manifest_hash: &str,
     build_id: &str,
 ) -> anyhow::Result<Option<(PathBuf, Vec<Record>)>> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot list {}", dir.display()))?
-        .filter_map(|entry| entry.ok().map(|e| e.path()))
-        .filter(|path| path.extension().is_some_and(|ext| ext == "parquet"))
-        .collect();
-    files.sort();
-    for path in files.into_iter().rev() {
+    for path in records::files_in(dir)?.into_iter().rev() {
         let rows = records::read(&path)?;
         if rows
             .first()

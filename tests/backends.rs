@@ -3,7 +3,7 @@
 use std::num::NonZeroUsize;
 
 use collide::backend::{serial, threads};
-use collide::sim::scene::{Extent, GasSpec, MassRule, Placement, RadiusDistribution};
+use collide::sim::scene::{GasSpec, MassRule, RadiusDistribution};
 use collide::sim::{Boundary, Broadphase, Physics};
 use collide::spec::{DtChoice, MethodSpec, RunSpec, SceneSource};
 
@@ -14,19 +14,12 @@ fn scenes() -> Vec<(String, RunSpec)> {
         for restitution in [1.0, 0.8] {
             for packing in [0.05, 0.35] {
                 let gas = GasSpec {
-                    n_particles: 3000,
-                    extent: Extent::Packing(packing),
                     radius: RadiusDistribution::Uniform { min: 0.6, max: 1.4 },
                     mass: MassRule::Area,
-                    speed_rms: 1.0,
-                    placement: Placement::Random,
                     boundary,
-                    physics: Physics {
-                        restitution,
-                        wall_restitution: restitution,
-                        gravity: None,
-                    },
+                    physics: Physics::with_restitution(restitution),
                     seed: 99,
+                    ..GasSpec::unit(3000, packing)
                 };
                 let name = format!("{} e={restitution} packing={packing}", boundary.name());
                 scenes.push((name, run_spec(gas, Broadphase::Grid)));
@@ -76,19 +69,12 @@ fn rayon_at_1_2_3_4_and_8_threads_gives_the_serial_hash() {
 #[test]
 fn rayon_all_pairs_and_gravity_give_the_serial_hash() {
     let mut gas = GasSpec {
-        n_particles: 800,
-        extent: Extent::Packing(0.3),
-        radius: RadiusDistribution::Fixed(1.0),
-        mass: MassRule::Fixed(1.0),
-        speed_rms: 1.0,
-        placement: Placement::Random,
-        boundary: Boundary::Walls,
         physics: Physics {
-            restitution: 0.9,
-            wall_restitution: 0.9,
             gravity: Some([0.0, -1.0]),
+            ..Physics::with_restitution(0.9)
         },
         seed: 5,
+        ..GasSpec::unit(800, 0.3)
     };
     for broadphase in [Broadphase::Grid, Broadphase::AllPairs] {
         let spec = run_spec(gas, broadphase);

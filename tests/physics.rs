@@ -1,7 +1,7 @@
 //! Physics over many steps: conservation, determinism, broad-phase equivalence, walls.
 
 use collide::backend::serial;
-use collide::sim::scene::{Extent, GasSpec, MassRule, Placement, RadiusDistribution};
+use collide::sim::scene::{GasSpec, Placement};
 use collide::sim::{Boundary, Broadphase, Physics, Stepper};
 use collide::spec::{DtChoice, MethodSpec, RunSpec, SceneSource};
 use collide::summary::RunSummary;
@@ -14,19 +14,10 @@ fn gas(
     seed: u64,
 ) -> GasSpec {
     GasSpec {
-        n_particles,
-        extent: Extent::Packing(packing),
-        radius: RadiusDistribution::Fixed(1.0),
-        mass: MassRule::Fixed(1.0),
-        speed_rms: 1.0,
-        placement: Placement::Random,
         boundary,
-        physics: Physics {
-            restitution,
-            wall_restitution: restitution,
-            gravity: None,
-        },
+        physics: Physics::with_restitution(restitution),
         seed,
+        ..GasSpec::unit(n_particles, packing)
     }
 }
 

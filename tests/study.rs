@@ -96,16 +96,9 @@ fn a_study_records_every_repetition_and_resume_runs_only_what_is_missing() {
         )
     };
     assert!(run(&[]).status.success());
-    let files: Vec<_> = std::fs::read_dir(out.join("tiny"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    let parquet: Vec<_> = files
-        .iter()
-        .filter(|p| p.extension().is_some_and(|e| e == "parquet"))
-        .collect();
-    assert_eq!(parquet.len(), 1, "{files:?}");
-    let rows = records::read(parquet[0]).unwrap();
+    let parquet = records::files_in(&out.join("tiny")).unwrap();
+    assert_eq!(parquet.len(), 1, "{parquet:?}");
+    let rows = records::read(&parquet[0]).unwrap();
     assert_eq!(rows.len(), 4);
     assert!(
         rows.iter()
@@ -128,7 +121,7 @@ fn a_study_records_every_repetition_and_resume_runs_only_what_is_missing() {
     );
 
     // As if the study had been killed after its first run: resume runs the other three.
-    records::write(parquet[0], &rows[..1]).unwrap();
+    records::write(&parquet[0], &rows[..1]).unwrap();
     let resumed = run(&["--resume"]);
     let stdout = String::from_utf8(resumed.stdout).unwrap();
     assert!(
@@ -140,7 +133,7 @@ fn a_study_records_every_repetition_and_resume_runs_only_what_is_missing() {
         stdout.contains("3 runs measured") && stdout.contains("1 kept"),
         "{stdout}"
     );
-    assert_eq!(records::read(parquet[0]).unwrap().len(), 4);
+    assert_eq!(records::read(&parquet[0]).unwrap().len(), 4);
 
     let table = collide(&["results", out.join("tiny").to_str().unwrap()]);
     let table = String::from_utf8(table.stdout).unwrap();
@@ -165,12 +158,7 @@ fn a_run_over_its_timeout_is_recorded_as_timed_out_and_fails_the_study() {
     assert!(!result.status.success());
     let stderr = String::from_utf8(result.stderr).unwrap();
     assert!(stderr.contains("1 run(s) failed"), "{stderr}");
-    let file = std::fs::read_dir(out.join("tiny"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.extension().is_some_and(|e| e == "parquet"))
-        .unwrap();
-    let rows = records::read(&file).unwrap();
+    let rows = records::read(&records::files_in(&out.join("tiny")).unwrap()[0]).unwrap();
     assert_eq!(rows[0].status, STATUS_TIMED_OUT);
     assert!(rows[0].wall_s.is_nan() && rows[0].state_hash.is_empty());
 }

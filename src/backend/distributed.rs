@@ -462,26 +462,19 @@ mod tests {
     use super::*;
     use crate::backend::comm::ThreadComm;
     use crate::backend::serial;
-    use crate::sim::scene::{Extent, GasSpec, MassRule, Placement, RadiusDistribution};
+    use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution};
     use crate::sim::{Broadphase, Physics};
     use crate::spec::{DtChoice, MethodSpec, SceneSource};
 
     fn spec(boundary: Boundary, restitution: f64, packing: f64) -> RunSpec {
         RunSpec {
             scene: SceneSource::Gas(GasSpec {
-                n_particles: 2000,
-                extent: Extent::Packing(packing),
                 radius: RadiusDistribution::Uniform { min: 0.6, max: 1.4 },
                 mass: MassRule::Area,
-                speed_rms: 1.0,
-                placement: Placement::Random,
                 boundary,
-                physics: Physics {
-                    restitution,
-                    wall_restitution: restitution,
-                    gravity: None,
-                },
+                physics: Physics::with_restitution(restitution),
                 seed: 17,
+                ..GasSpec::unit(2000, packing)
             }),
             method: MethodSpec {
                 dt: DtChoice::Fixed(0.05),

@@ -124,6 +124,22 @@ pub struct Physics {
     pub gravity: Option<[f64; 2]>,
 }
 
+impl Physics {
+    /// Restitution `e` for pairs and walls alike, no field.
+    pub fn with_restitution(e: f64) -> Physics {
+        Physics {
+            restitution: e,
+            wall_restitution: e,
+            gravity: None,
+        }
+    }
+
+    /// Elastic pairs and walls, no field.
+    pub fn elastic() -> Physics {
+        Physics::with_restitution(1.0)
+    }
+}
+
 /// A complete initial condition: box, physics and disks.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scene {
@@ -259,6 +275,23 @@ pub enum PlacementError {
 }
 
 impl GasSpec {
+    /// The reference gas of benches and tests: `n_particles` disks of radius 1 and mass
+    /// 1 at area fraction `packing`, v_rms = 1, random placement, elastic walls, seed 0.
+    /// Change any field with struct-update syntax.
+    pub fn unit(n_particles: usize, packing: f64) -> GasSpec {
+        GasSpec {
+            n_particles,
+            extent: Extent::Packing(packing),
+            radius: RadiusDistribution::Fixed(1.0),
+            mass: MassRule::Fixed(1.0),
+            speed_rms: 1.0,
+            placement: Placement::Random,
+            boundary: Boundary::Walls,
+            physics: Physics::elastic(),
+            seed: 0,
+        }
+    }
+
     /// Draws radii, positions and velocities from the seed.
     pub fn build(&self) -> Result<Scene, PlacementError> {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(self.seed);
