@@ -14,11 +14,13 @@ pub struct Environment {
     pub physical_cores: usize,
     pub memory_bytes: u64,
     pub os: String,
+    /// The compiler that built this collide.
     pub rustc: String,
     /// "release" or "debug".
     pub profile: String,
     /// Cargo features compiled in, comma-separated ("" for none).
     pub features: String,
+    /// The working tree's commit and state when the study ran (`git` in the current folder).
     pub git_commit: String,
     pub git_dirty: bool,
     /// The MPI library's first `mpirun --version` line; "none" without the mpi feature.
@@ -53,7 +55,7 @@ impl Environment {
             physical_cores: physical_cores(&cpuinfo).unwrap_or_else(machine_cores),
             memory_bytes: memory_bytes(&read("/proc/meminfo")).unwrap_or(0),
             os: os_name(),
-            rustc: command_line("rustc", &["--version"]),
+            rustc: env!("COLLIDE_RUSTC_VERSION").to_owned(),
             profile: if cfg!(debug_assertions) {
                 "debug"
             } else {

@@ -1,6 +1,7 @@
 //! Files the tool writes: atomic replacement, and the CSV state dump.
 
 use std::io::{BufWriter, Write};
+use std::os::unix::fs::PermissionsExt;
 use std::path::Path;
 
 use anyhow::Context;
@@ -28,6 +29,10 @@ pub fn write_atomically(
         write(&mut writer).and_then(|()| writer.flush())
     }
     .with_context(|| format!("cannot write {}", path.display()))?;
+    // Temporary files are private (0600); a finished result is an ordinary file.
+    temp.as_file()
+        .set_permissions(std::fs::Permissions::from_mode(0o644))
+        .with_context(|| format!("cannot make {} readable", path.display()))?;
     temp.persist(path)
         .with_context(|| format!("cannot move the finished file to {}", path.display()))?;
     Ok(())

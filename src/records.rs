@@ -80,6 +80,8 @@ pub struct Record {
     pub load_average_start: f64,
     /// 1-minute load average when this row was written.
     pub load_average: f64,
+    /// 1-minute load average when the study finished; NaN while it runs (or if killed).
+    pub load_average_end: f64,
     /// UTC, RFC 3339: when the study started and when this run finished.
     pub study_started_utc: String,
     pub finished_utc: String,
@@ -200,6 +202,7 @@ impl Record {
             mpi_library: env.mpi_library.clone(),
             load_average_start: env.load_average_start,
             load_average: crate::environment::load_average(),
+            load_average_end: f64::NAN,
             study_started_utc: context.study_started_utc.to_owned(),
             finished_utc: utc_now(),
         }
@@ -249,7 +252,7 @@ macro_rules! for_each_column {
                  broad_phase_s, collision_s, communication_s, kinetic_energy_initial,
                  kinetic_energy_final, momentum_initial_x, momentum_initial_y,
                  momentum_final_x, momentum_final_y, max_overlap, load_average_start,
-                 load_average;
+                 load_average, load_average_end;
             bool: oversubscribed, git_dirty;
             opt_u64: seed
         )

@@ -88,6 +88,7 @@ pub fn run_study(
         .map(|r| (r.config_key.clone(), r.repetition))
         .collect();
     rows.retain(|r| r.status == STATUS_OK);
+    let kept_ok = rows.len();
 
     let mut configurations: Vec<&Configuration> = study.configurations.iter().collect();
     if !cfg!(feature = "mpi") {
@@ -221,6 +222,13 @@ pub fn run_study(
         progress.inc(1);
     }
     progress.finish_and_clear();
+    if !todo.is_empty() {
+        let end = crate::environment::load_average();
+        for row in rows.iter_mut().skip(kept_ok) {
+            row.load_average_end = end;
+        }
+        records::write(&results, &rows)?;
+    }
     Ok(StudyOutcome {
         results,
         measured,

@@ -1,6 +1,7 @@
 //! `collide run` and `collide results`: manifests, the runner, Parquet records, resume,
 //! and bad input.
 
+use std::os::unix::fs::PermissionsExt;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -100,6 +101,10 @@ fn a_study_records_every_repetition_and_resume_runs_only_what_is_missing() {
     assert_eq!(parquet.len(), 1, "{parquet:?}");
     let rows = records::read(&parquet[0]).unwrap();
     assert_eq!(rows.len(), 4);
+    let mode = std::fs::metadata(&parquet[0]).unwrap().permissions().mode();
+    assert_eq!(mode & 0o777, 0o644, "results are ordinary readable files");
+    assert!(rows.iter().all(|r| r.load_average_end.is_finite()));
+    assert!(rows[0].rustc.starts_with("rustc "), "{}", rows[0].rustc);
     assert!(
         rows.iter()
             .all(|r| r.status == "ok" && r.study == "tiny" && r.n == 200)
