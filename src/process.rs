@@ -1,11 +1,16 @@
-//! Child processes under a timeout: output captured, and on timeout the whole process
-//! group killed (an MPI launcher's ranks included).
+//! Child processes under a timeout: output captured, each child in its own process
+//! group so that everything it starts (an MPI launcher's ranks) can be stopped with it,
+//! on timeout or when collide itself is interrupted (Ctrl-C, SIGTERM).
 
+use std::collections::BTreeSet;
 use std::io::Read;
 use std::os::unix::process::CommandExt;
 use std::process::{Command, ExitStatus, Stdio};
+use std::sync::Mutex;
 use std::thread;
 use std::time::{Duration, Instant};
+
+use rustix::process::{Pid, Signal, kill_process_group};
 
 /// How a child process ended.
 #[derive(Debug)]
@@ -15,12 +20,42 @@ pub enum Ended {
         stdout: String,
         stderr: String,
     },
-    /// Killed at the timeout, with what it had printed to stderr.
+    /// Stopped at the timeout, with what it had printed to stderr.
     TimedOut { stderr: String },
 }
 
-/// Runs `command` (stdin closed, output captured) in its own process group; kills the
-/// group if it runs longer than `timeout`. Fails only if the program cannot start.
+/// Time a child gets to stop its own children after SIGINT before it is killed.
+const GRACE: Duration = Duration::from_secs(2);
+
+/// Process groups of the children now running, for [`stop_children_on_interrupt`].
+static RUNNING: Mutex<BTreeSet<i32>> = Mutex::new(BTreeSet::new());
+
+/// On Ctrl-C or SIGTERM, interrupts every running child's group (a child that launched
+/// MPI ranks stops them in turn), then exits with code 130. Call once, early.
+pub fn stop_children_on_interrupt() {
+    let installed = ctrlc::set_handler(|| {
+        let groups: Vec<i32> = RUNNING
+            .lock()
+            .map_or_else(|_| Vec::new(), |g| g.iter().copied().collect());
+        for group in groups {
+            signal_group(group, Signal::INT);
+        }
+        std::process::exit(130);
+    });
+    // A second call in the same process fails; the first handler stays, which is right.
+    let _ = installed;
+}
+
+fn signal_group(group: i32, signal: Signal) {
+    if let Some(pid) = Pid::from_raw(group) {
+        // A failure means the group is already gone.
+        let _ = kill_process_group(pid, signal);
+    }
+}
+
+/// Runs `command` (stdin closed, output captured) in its own process group. If it runs
+/// longer than `timeout`, its group is interrupted (SIGINT) and, after a grace period,
+/// killed. Fails only if the program cannot start.
 pub fn run_with_timeout(mut command: Command, timeout: Duration) -> std::io::Result<Ended> {
     command
         .stdin(Stdio::null())
@@ -28,35 +63,47 @@ pub fn run_with_timeout(mut command: Command, timeout: Duration) -> std::io::Res
         .stderr(Stdio::piped())
         .process_group(0);
     let mut child = command.spawn()?;
+    // The child leads its own group (process_group(0)): its pid is the group id.
+    let group = child.id() as i32;
+    if let Ok(mut running) = RUNNING.lock() {
+        running.insert(group);
+    }
     let stdout = read_in_background(child.stdout.take());
     let stderr = read_in_background(child.stderr.take());
     let started = Instant::now();
+    let mut interrupted_at = None;
     let status = loop {
-        match child.try_wait()? {
-            Some(status) => break Some(status),
+        if let Some(status) = child.try_wait()? {
+            break Some(status);
+        }
+        match interrupted_at {
             None if started.elapsed() > timeout => {
-                // The child leads its own group (process_group(0)): kill(-pid) reaches
-                // everything it started. A failure means the group is already gone.
-                let _ = rustix::process::kill_process_group(
-                    rustix::process::Pid::from_child(&child),
-                    rustix::process::Signal::KILL,
-                );
+                signal_group(group, Signal::INT);
+                interrupted_at = Some(Instant::now());
+            }
+            Some(at) if at.elapsed() > GRACE => {
+                signal_group(group, Signal::KILL);
                 let _ = child.kill();
                 let _ = child.wait();
                 break None;
             }
-            None => thread::sleep(Duration::from_millis(10)),
+            _ => thread::sleep(Duration::from_millis(10)),
         }
     };
+    // Whatever the child left in its group goes too (a launcher's stray ranks).
+    signal_group(group, Signal::KILL);
+    if let Ok(mut running) = RUNNING.lock() {
+        running.remove(&group);
+    }
     let stdout = stdout.join().unwrap_or_default();
     let stderr = stderr.join().unwrap_or_default();
-    Ok(match status {
-        Some(status) => Ended::Exited {
+    Ok(match (status, interrupted_at) {
+        (Some(status), None) => Ended::Exited {
             status,
             stdout,
             stderr,
         },
-        None => Ended::TimedOut { stderr },
+        _ => Ended::TimedOut { stderr },
     })
 }
 

@@ -46,6 +46,8 @@ pub fn run_study(
     manifest_text: &str,
     options: &RunOptions,
 ) -> anyhow::Result<StudyOutcome> {
+    // Ctrl-C stops the running child too; every finished repetition is already on disk.
+    crate::process::stop_children_on_interrupt();
     let quiet = options.quiet || !std::io::stdout().is_terminal();
     let note = |text: &str| {
         if !quiet {

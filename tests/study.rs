@@ -261,3 +261,55 @@ fn corrupt_foreign_and_old_results_are_refused_with_the_reason() {
     let stderr = stderr_of(&["results", empty.path().to_str().unwrap()]);
     assert!(stderr.contains("no .parquet results"), "{stderr}");
 }
+
+/// Processes whose command line mentions `needle`.
+fn processes_mentioning(needle: &str) -> Vec<String> {
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .filter_map(|entry| std::fs::read(entry.ok()?.path().join("cmdline")).ok())
+        .map(|bytes| String::from_utf8_lossy(&bytes).replace('\0', " "))
+        .filter(|cmdline| cmdline.contains(needle))
+        .collect()
+}
+
+#[test]
+fn ctrl_c_stops_the_running_child_and_keeps_what_was_measured() {
+    use std::os::unix::process::CommandExt;
+
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    // A 20-step run, then one of ten million steps (about a minute) to interrupt.
+    let path = manifest(
+        dir.path(),
+        "repetitions = 1\nwarmups = 0\n[sweep]\nsteps = [20, 10000000]\n[backends]\nserial = true\n",
+    );
+    let mut study = std::process::Command::new(env!("CARGO_BIN_EXE_collide"))
+        .args(["run", &path, "--quiet", "--out", out.to_str().unwrap()])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        // Its own group: the "terminal" Ctrl-C below reaches it and not this test.
+        .process_group(0)
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while records::files_in(&out.join("tiny")).map_or(true, |f| f.is_empty()) {
+        assert!(
+            started.elapsed() < Duration::from_secs(20),
+            "no results file appeared"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let group = rustix::process::Pid::from_raw(study.id() as i32).unwrap();
+    rustix::process::kill_process_group(group, rustix::process::Signal::INT).unwrap();
+    let status = study.wait().unwrap();
+    assert_eq!(status.code(), Some(130));
+    let rows = records::read(&records::files_in(&out.join("tiny")).unwrap()[0]).unwrap();
+    assert_eq!(rows.len(), 1, "the finished run is kept");
+    assert_eq!(rows[0].steps, 20);
+    std::thread::sleep(Duration::from_millis(200));
+    let scene = dir.path().join("scene.toml");
+    let left = processes_mentioning(scene.to_str().unwrap());
+    assert!(left.is_empty(), "children outlived the study: {left:?}");
+}

@@ -7,7 +7,7 @@ use std::process::Command;
 use std::time::Duration;
 
 use crate::backend::{BackendError, machine_cores};
-use crate::process::{Ended, run_with_timeout, tail};
+use crate::process::{Ended, run_with_timeout, stop_children_on_interrupt, tail};
 use crate::summary::RunSummary;
 
 /// How to start the ranks.
@@ -47,6 +47,8 @@ pub fn launch(launch: &Launch, args: &[OsString]) -> Result<RunSummary, BackendE
         // More ranks than cores: allowed (and flagged in the summary), not refused.
         command.env("OMPI_MCA_rmaps_base_oversubscribe", "1");
     }
+    // Ctrl-C (or a study's timeout, which interrupts this process) stops the ranks too.
+    stop_children_on_interrupt();
     let ended = run_with_timeout(command, launch.timeout).map_err(|e| {
         BackendError::Mpi(format!(
             "cannot start `{program}`: {e}; install OpenMPI (`apt-get install openmpi-bin`) \
