@@ -5,13 +5,13 @@ use std::num::NonZeroUsize;
 use anyhow::{Context, bail};
 
 use crate::backend::{BackendSpec, RunOutcome, serial, threads};
-use crate::cli::{BackendName, Cli, Command, RunArgs, SimulateArgs};
+use crate::cli::{BackendName, Cli, Command, ReportArgs, RunArgs, SimulateArgs};
 use crate::output::{write_atomically, write_state_csv};
 use crate::runner::RunOptions;
 use crate::scene_file;
 #[cfg(feature = "mpi")]
 use crate::summary::RunSummary;
-use crate::{manifest, results, runner};
+use crate::{manifest, report, results, runner};
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
@@ -21,7 +21,28 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             print!("{}", results::table(&results::load(&args.path)?));
             Ok(())
         }
+        Command::Report(args) => write_report(&args),
     }
+}
+
+fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
+    let records = results::load(&args.path)?;
+    let study = records.first().map_or("study", |r| r.study.as_str());
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| std::path::Path::new("reports").join(study));
+    std::fs::create_dir_all(&out).with_context(|| {
+        format!(
+            "cannot create the report folder {}; choose another with --out",
+            out.display()
+        )
+    })?;
+    let path = out.join("report.md");
+    let text = report::markdown(&records, &args.path.display().to_string());
+    write_atomically(&path, |file| file.write_all(text.as_bytes()))?;
+    println!("report written to {}", path.display());
+    Ok(())
 }
 
 fn run_study(args: &RunArgs) -> anyhow::Result<()> {

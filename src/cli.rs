@@ -27,6 +27,17 @@ pub enum Command {
     Run(RunArgs),
     /// Print a table of a study's recorded runs.
     Results(ResultsArgs),
+    /// Write a markdown scaling report of a study's recorded runs.
+    Report(ReportArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// A study's results folder (results/NAME/) or one results file.
+    pub path: PathBuf,
+    /// Folder for report.md (default: reports/<study name>/).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]

@@ -3,6 +3,7 @@
 //!
 //! Arrows point one way: `app` → `backend` → `sim`. `sim` is pure.
 
+pub mod analysis;
 pub mod app;
 pub mod backend;
 pub mod cli;
@@ -11,6 +12,7 @@ pub mod manifest;
 pub mod output;
 pub mod process;
 pub mod records;
+pub mod report;
 pub mod results;
 pub mod runner;
 pub mod scene_file;

@@ -5,4 +5,5 @@ mod cli;
 #[cfg(feature = "mpi")]
 mod mpi;
 mod physics;
+mod report;
 mod study;

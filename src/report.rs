@@ -1,0 +1,300 @@
+//! `collide report`: a study's records as a markdown report in the shape of the seed's
+//! results (its Cuadro 1, speedup, efficiency, FPS), with the environment, warnings and
+//! findings drawn from the data. Figures are not drawn yet.
+
+use std::fmt::Write as _;
+
+use crate::analysis::{Baseline, Setup, analyse};
+use crate::records::{Record, STATUS_OK};
+
+/// The seed report's Cuadro 1: 1000 disks, 400 cycles.
+const SEED_N: u64 = 1000;
+const SEED_STEPS: u64 = 400;
+const SEED_SERIAL_S: f64 = 33.8;
+const SEED_MPI_12_S: f64 = 2.16;
+/// Parallel efficiency below this is called out in the findings.
+const EFFICIENCY_FLOOR: f64 = 0.75;
+
+/// The report of one study's records; `source` names where they were read from.
+pub fn markdown(records: &[Record], source: &str) -> String {
+    let mut out = String::new();
+    let Some(first) = records.first() else {
+        return "# Empty study\n\nNo records.\n".to_owned();
+    };
+    let setups = analyse(records);
+    let _ = writeln!(out, "# Scaling report: study `{}`\n", first.study);
+    let _ = writeln!(
+        out,
+        "Regenerate with `collide run experiments/{}.toml`, then `collide report {source}`.\n",
+        first.study
+    );
+    environment(&mut out, first, records);
+    warnings(&mut out, records, &setups);
+    for setup in &setups {
+        setup_section(&mut out, setup);
+    }
+    findings(&mut out, &setups);
+    out
+}
+
+fn environment(out: &mut String, first: &Record, records: &[Record]) {
+    let ok = records.iter().filter(|r| r.status == STATUS_OK).count();
+    let dirty = if first.git_dirty {
+        " (uncommitted changes)"
+    } else {
+        ""
+    };
+    let _ = writeln!(out, "## Environment\n");
+    let _ = writeln!(out, "| | |\n| --- | --- |");
+    let _ = writeln!(
+        out,
+        "| CPU | {} ({} logical, {} physical cores) |",
+        first.cpu_model, first.logical_cores, first.physical_cores
+    );
+    let _ = writeln!(
+        out,
+        "| Memory | {:.1} GiB |",
+        first.memory_bytes as f64 / (1u64 << 30) as f64
+    );
+    let _ = writeln!(out, "| OS | {} |", first.os);
+    let _ = writeln!(out, "| Host | {} |", first.hostname);
+    let _ = writeln!(
+        out,
+        "| Build | {}, {} profile, features [{}] |",
+        first.rustc, first.profile, first.features
+    );
+    let _ = writeln!(out, "| Commit | `{}`{dirty} |", first.git_commit);
+    let _ = writeln!(out, "| MPI | {} |", first.mpi_library);
+    let _ = writeln!(out, "| Started | {} |", first.study_started_utc);
+    let _ = writeln!(
+        out,
+        "| Runs | {ok} measured, {} failed |\n",
+        records.len() - ok
+    );
+}
+
+fn warnings(out: &mut String, records: &[Record], setups: &[Setup]) {
+    let mut oversubscribed: Vec<String> = records
+        .iter()
+        .filter(|r| r.oversubscribed && r.status == STATUS_OK)
+        .map(|r| format!("{} × {}", r.backend, r.workers))
+        .collect();
+    oversubscribed.sort();
+    oversubscribed.dedup();
+    if !oversubscribed.is_empty() {
+        let _ = writeln!(
+            out,
+            "> **Warning: oversubscribed.** More workers than the {} logical cores: {}. Their \
+             times measure contention, not scaling.\n",
+            records[0].logical_cores,
+            oversubscribed.join(", ")
+        );
+    }
+    for setup in setups.iter().filter(|s| s.distinct_hashes > 1) {
+        let _ = writeln!(
+            out,
+            "> **Warning: backends disagree.** {} distinct final states (`state_hash`) for {}; \
+             speedups compare different computations.\n",
+            setup.distinct_hashes,
+            describe(setup)
+        );
+    }
+    let failed = records.iter().filter(|r| r.status != STATUS_OK).count();
+    if failed > 0 {
+        let _ = writeln!(
+            out,
+            "> **Warning: {failed} run(s) failed or timed out**; they are left out of every figure below.\n"
+        );
+    }
+}
+
+fn describe(setup: &Setup) -> String {
+    format!(
+        "scene `{}`, n = {}, {} steps of dt = {}, packing {:.3}, {} broad phase",
+        setup.scene, setup.n, setup.steps, setup.dt, setup.packing, setup.broadphase
+    )
+}
+
+fn setup_section(out: &mut String, setup: &Setup) {
+    let _ = writeln!(out, "## {}\n", describe(setup));
+    if setup.distinct_hashes == 1 {
+        let _ = writeln!(
+            out,
+            "Every run ended in the same state (one `state_hash`).\n"
+        );
+    }
+    // Cuadro 1: workers × seconds per backend.
+    let mut workers: Vec<u64> = setup
+        .backends
+        .iter()
+        .flat_map(|b| b.points.iter().map(|p| p.workers))
+        .collect();
+    workers.sort_unstable();
+    workers.dedup();
+    let _ = writeln!(out, "### Seconds per run (the seed's Cuadro 1)\n");
+    let _ = write!(out, "| workers |");
+    for backend in &setup.backends {
+        let _ = write!(out, " seconds_{} |", backend.backend);
+    }
+    let _ = write!(out, "\n| ---: |");
+    for _ in &setup.backends {
+        let _ = write!(out, " ---: |");
+    }
+    let _ = writeln!(out);
+    for &p in &workers {
+        let _ = write!(out, "| {p} |");
+        for backend in &setup.backends {
+            match backend.points.iter().find(|point| point.workers == p) {
+                Some(point) => {
+                    let _ = write!(
+                        out,
+                        " {:.4} ({:.4}–{:.4}, {} runs){} |",
+                        point.median_s,
+                        point.min_s,
+                        point.max_s,
+                        point.reps,
+                        if point.oversubscribed { " ⚠" } else { "" }
+                    );
+                }
+                None => {
+                    let _ = write!(out, " |");
+                }
+            }
+        }
+        let _ = writeln!(out);
+    }
+    let _ = writeln!(
+        out,
+        "\nMedian of the repetitions, with their min–max; ⚠ marks oversubscribed runs.\n"
+    );
+
+    let _ = writeln!(out, "### Speedup, efficiency and FPS\n");
+    for backend in &setup.backends {
+        let baseline = match backend.baseline {
+            Baseline::Serial(t) => format!("the serial backend ({t:.4} s)"),
+            Baseline::OneWorker(t) => format!("{} at 1 worker ({t:.4} s)", backend.backend),
+            Baseline::Missing => "nothing (no serial or 1-worker run)".to_owned(),
+        };
+        let _ = writeln!(
+            out,
+            "- **{}**: speedup against {baseline}.",
+            backend.backend
+        );
+    }
+    let _ = writeln!(
+        out,
+        "\n| backend | workers | speedup S(p) | efficiency E(p) | Karp–Flatt e(p) | steps/s |\n| --- | ---: | ---: | ---: | ---: | ---: |"
+    );
+    for backend in &setup.backends {
+        for point in &backend.points {
+            let karp_flatt = if point.karp_flatt.is_finite() {
+                format!("{:.3}", point.karp_flatt)
+            } else {
+                "—".to_owned()
+            };
+            let _ = writeln!(
+                out,
+                "| {} | {} | {:.2} | {:.0}% | {karp_flatt} | {:.0} |",
+                backend.backend,
+                point.workers,
+                point.speedup,
+                100.0 * point.efficiency,
+                point.fps
+            );
+        }
+    }
+    let fits: Vec<String> = setup
+        .backends
+        .iter()
+        .filter_map(|b| {
+            b.amdahl.map(|fit| {
+                format!(
+                    "{}: f = {:.3} (R² = {:.3})",
+                    b.backend, fit.serial_fraction, fit.r_squared
+                )
+            })
+        })
+        .collect();
+    if !fits.is_empty() {
+        let _ = writeln!(
+            out,
+            "\nAmdahl fit T(p) = T₁·(f + (1 − f)/p), least squares on the medians: {}. An R² \
+             far below 1 means Amdahl's law does not describe these times (oversubscription, \
+             communication that grows with p).\n",
+            fits.join("; ")
+        );
+    }
+}
+
+fn findings(out: &mut String, setups: &[Setup]) {
+    let _ = writeln!(out, "## Findings\n");
+    for setup in setups {
+        let all = setup
+            .backends
+            .iter()
+            .flat_map(|b| b.points.iter().map(move |p| (b.backend.as_str(), p)));
+        if let Some((backend, best)) = all
+            .clone()
+            .min_by(|a, b| a.1.median_s.total_cmp(&b.1.median_s))
+        {
+            let _ = writeln!(
+                out,
+                "- {}: fastest is {backend} with {} worker(s), median {:.4} s ({:.0} steps/s).",
+                describe(setup),
+                best.workers,
+                best.median_s,
+                best.fps
+            );
+        }
+        for backend in &setup.backends {
+            let low: Vec<String> = backend
+                .points
+                .iter()
+                .filter(|p| p.workers > 1 && p.efficiency < EFFICIENCY_FLOOR)
+                .map(|p| format!("{} workers ({:.0}%)", p.workers, 100.0 * p.efficiency))
+                .collect();
+            if !low.is_empty() {
+                let _ = writeln!(
+                    out,
+                    "- {} efficiency falls below {:.0}% at {}.",
+                    backend.backend,
+                    100.0 * EFFICIENCY_FLOOR,
+                    low.join(", ")
+                );
+            }
+        }
+        if setup.n == SEED_N && setup.steps == SEED_STEPS {
+            let serial = setup
+                .backends
+                .iter()
+                .find(|b| b.backend == "serial")
+                .and_then(|b| b.points.first());
+            let mpi_12 = setup
+                .backends
+                .iter()
+                .find(|b| b.backend == "mpi")
+                .and_then(|b| b.points.iter().find(|p| p.workers == 12));
+            if let Some(serial) = serial {
+                let _ = writeln!(
+                    out,
+                    "- Against the seed report (1000 disks, 400 cycles): serial {:.4} s here against \
+                     its {SEED_SERIAL_S} s, {:.0}× faster.",
+                    serial.median_s,
+                    SEED_SERIAL_S / serial.median_s
+                );
+            }
+            if let Some(mpi) = mpi_12 {
+                let _ = writeln!(
+                    out,
+                    "- MPI with 12 ranks: {:.4} s here against the seed's {SEED_MPI_12_S} s{}.",
+                    mpi.median_s,
+                    if mpi.oversubscribed {
+                        " (oversubscribed here, so not a scaling measurement)"
+                    } else {
+                        ""
+                    }
+                );
+            }
+        }
+    }
+}

@@ -1,0 +1,134 @@
+//! `collide report` from fixed synthetic records: the markdown is snapshot-tested, and
+//! the numbers in it are checked against hand-computed speedups.
+
+use collide::environment::Environment;
+use collide::records::{Record, RecordContext};
+use collide::report;
+use collide::summary::RunSummary;
+
+fn environment() -> Environment {
+    Environment {
+        hostname: "testhost".into(),
+        cpu_model: "Test CPU @ 2.0GHz".into(),
+        logical_cores: 2,
+        physical_cores: 2,
+        memory_bytes: 8 << 30,
+        os: "Test OS, Linux 6.0".into(),
+        rustc: "rustc 1.95.0".into(),
+        profile: "release".into(),
+        features: "mpi".into(),
+        git_commit: "0123456789ab".into(),
+        git_dirty: false,
+        mpi_library: "mpirun (Open MPI) 4.1.4".into(),
+        load_average_start: 0.5,
+    }
+}
+
+fn summary(backend: &str, threads: usize, ranks: usize, wall_s: f64) -> RunSummary {
+    RunSummary {
+        n: 1000,
+        steps: 400,
+        dt: 0.1,
+        dt_auto_fraction: None,
+        backend: backend.into(),
+        workers: threads * ranks,
+        threads,
+        ranks,
+        oversubscribed: threads * ranks > 2,
+        boundary: "walls".into(),
+        broadphase: "grid".into(),
+        packing: 0.05,
+        seed: Some(12345),
+        wall_s,
+        setup_s: 0.001,
+        fps: 400.0 / wall_s,
+        particle_steps_per_s: 400_000.0 / wall_s,
+        integration_s: 0.1 * wall_s,
+        broad_phase_s: 0.6 * wall_s,
+        collision_s: 0.2 * wall_s,
+        communication_s: 0.0,
+        kinetic_energy_initial: 500.0,
+        kinetic_energy_final: 500.0,
+        momentum_initial: [0.0, 0.0],
+        momentum_final: [0.0, 0.0],
+        pair_collisions: 1734,
+        wall_collisions: 182,
+        max_overlap: 0.138,
+        state_hash: "51a3e11e31576e81".into(),
+    }
+}
+
+/// Serial at 1; rayon and MPI at 1, 2, 4 (4 oversubscribed on 2 cores): three
+/// repetitions each, the middle one the median.
+fn records() -> Vec<Record> {
+    let environment = environment();
+    let runs: [(&str, usize, [f64; 3]); 7] = [
+        ("serial", 1, [0.0100, 0.0102, 0.0110]),
+        ("rayon", 1, [0.0104, 0.0105, 0.0120]),
+        ("rayon", 2, [0.0055, 0.0056, 0.0060]),
+        ("rayon", 4, [0.0060, 0.0070, 0.0090]),
+        ("mpi", 1, [0.0106, 0.0108, 0.0115]),
+        ("mpi", 2, [0.0058, 0.0060, 0.0061]),
+        ("mpi", 4, [0.0100, 0.0120, 0.0150]),
+    ];
+    let mut records = Vec::new();
+    for repetition in 0..3 {
+        for (backend, workers, times) in runs {
+            let key = format!("{backend}-{workers}");
+            let context = RecordContext {
+                study: "synthetic",
+                manifest_hash: "m",
+                build_id: "b",
+                config_key: &key,
+                scene: "seed-1000",
+                backend,
+                workers: workers as u64,
+                repetition,
+                environment: &environment,
+                study_started_utc: "2026-11-22T12:00:00Z",
+            };
+            let (threads, ranks) = if backend == "mpi" {
+                (1, workers)
+            } else {
+                (workers, 1)
+            };
+            let wall_s = times[repetition as usize];
+            records.push(Record::measured(
+                &context,
+                &summary(backend, threads, ranks, wall_s),
+            ));
+        }
+    }
+    records
+}
+
+#[test]
+fn the_report_of_fixed_records_matches_its_snapshot() {
+    insta::assert_snapshot!(report::markdown(&records(), "results/synthetic/"));
+}
+
+#[test]
+fn speedups_efficiencies_and_warnings_are_computed_from_the_medians() {
+    let text = report::markdown(&records(), "results/synthetic/");
+    // rayon at 2: S = 0.0102 / 0.0056 = 1.82, E = 91%; Karp–Flatt (1/1.82 − 1/2)/(1/2) = 0.098.
+    assert!(
+        text.contains("| rayon | 2 | 1.82 | 91% | 0.098 |"),
+        "{text}"
+    );
+    assert!(text.contains("Warning: oversubscribed"), "{text}");
+    assert!(
+        text.contains("mpi × 4") && text.contains("rayon × 4"),
+        "{text}"
+    );
+    assert!(
+        text.contains("falls below 75% at 4 workers (36%)"),
+        "{text}"
+    );
+    assert!(text.contains("33.8 s"), "{text}");
+    assert!(!text.contains("disagree"), "{text}");
+
+    let mut disagreeing = records();
+    disagreeing[0].state_hash = "ffffffffffffffff".into();
+    let text = report::markdown(&disagreeing, "results/synthetic/");
+    assert!(text.contains("Warning: backends disagree"), "{text}");
+}
