@@ -11,7 +11,7 @@ use crate::runner::RunOptions;
 use crate::scene_file;
 #[cfg(feature = "mpi")]
 use crate::summary::RunSummary;
-use crate::{manifest, report, results, runner};
+use crate::{analysis, figures, manifest, report, results, runner};
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
@@ -38,8 +38,26 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
             out.display()
         )
     })?;
+    let setups = analysis::analyse(&records);
+    let mut figures = Vec::with_capacity(setups.len());
+    for (index, setup) in setups.iter().enumerate() {
+        let drawn = figures::draw_setup(setup, &out, &format!("setup-{}", index + 1))?;
+        let names = drawn
+            .into_iter()
+            .map(|(figure, path)| {
+                let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+                (figure, name.unwrap_or_default())
+            })
+            .collect();
+        figures.push(names);
+    }
     let path = out.join("report.md");
-    let text = report::markdown(&records, &args.path.display().to_string());
+    let text = report::markdown(
+        &records,
+        &setups,
+        &args.path.display().to_string(),
+        &figures,
+    );
     write_atomically(&path, |file| file.write_all(text.as_bytes()))?;
     println!("report written to {}", path.display());
     Ok(())

@@ -8,6 +8,7 @@ pub mod app;
 pub mod backend;
 pub mod cli;
 pub mod environment;
+pub mod figures;
 pub mod manifest;
 pub mod output;
 pub mod process;

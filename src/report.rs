@@ -1,10 +1,11 @@
 //! `collide report`: a study's records as a markdown report in the shape of the seed's
 //! results (its Cuadro 1, speedup, efficiency, FPS), with the environment, warnings and
-//! findings drawn from the data. Figures are not drawn yet.
+//! findings drawn from the data, linking the figures drawn beside it (`figures`).
 
 use std::fmt::Write as _;
 
-use crate::analysis::{Baseline, Setup, analyse};
+use crate::analysis::{Baseline, Setup};
+use crate::figures::Figure;
 use crate::records::{Record, STATUS_OK};
 
 /// The seed report's Cuadro 1: 1000 disks, 400 cycles.
@@ -15,13 +16,19 @@ const SEED_MPI_12_S: f64 = 2.16;
 /// Parallel efficiency below this is called out in the findings.
 const EFFICIENCY_FLOOR: f64 = 0.75;
 
-/// The report of one study's records; `source` names where they were read from.
-pub fn markdown(records: &[Record], source: &str) -> String {
+/// The report of one study's records, analysed into `setups` ([`crate::analysis::analyse`]);
+/// `source` names where they were read from, `figures[i]` the PNG files (relative to the
+/// report) of setup i.
+pub fn markdown(
+    records: &[Record],
+    setups: &[Setup],
+    source: &str,
+    figures: &[Vec<(Figure, String)>],
+) -> String {
     let mut out = String::new();
     let Some(first) = records.first() else {
         return "# Empty study\n\nNo records.\n".to_owned();
     };
-    let setups = analyse(records);
     let _ = writeln!(out, "# Scaling report: study `{}`\n", first.study);
     let _ = writeln!(
         out,
@@ -29,11 +36,14 @@ pub fn markdown(records: &[Record], source: &str) -> String {
         first.study
     );
     environment(&mut out, first, records);
-    warnings(&mut out, records, &setups);
-    for setup in &setups {
+    warnings(&mut out, records, setups);
+    for (index, setup) in setups.iter().enumerate() {
         setup_section(&mut out, setup);
+        for (figure, file) in figures.get(index).into_iter().flatten() {
+            let _ = writeln!(out, "![{}]({file})\n", figure.file_stem());
+        }
     }
-    findings(&mut out, &setups);
+    findings(&mut out, setups);
     out
 }
 

@@ -2,9 +2,10 @@
 //! the numbers in it are checked against hand-computed speedups.
 
 use collide::environment::Environment;
+use collide::figures::{self, Figure};
 use collide::records::{Record, RecordContext};
-use collide::report;
 use collide::summary::RunSummary;
+use collide::{analysis, report};
 
 fn environment() -> Environment {
     Environment {
@@ -102,14 +103,50 @@ fn records() -> Vec<Record> {
     records
 }
 
+fn markdown(records: &[Record]) -> String {
+    let setups = analysis::analyse(records);
+    let figures: Vec<Vec<(Figure, String)>> = (1..=setups.len())
+        .map(|i| {
+            Figure::ALL
+                .iter()
+                .map(|&f| (f, format!("setup-{i}-{}.png", f.file_stem())))
+                .collect()
+        })
+        .collect();
+    report::markdown(records, &setups, "results/synthetic/", &figures)
+}
+
 #[test]
 fn the_report_of_fixed_records_matches_its_snapshot() {
-    insta::assert_snapshot!(report::markdown(&records(), "results/synthetic/"));
+    insta::assert_snapshot!(markdown(&records()));
+}
+
+#[test]
+fn every_figure_is_a_png_of_the_stated_size_with_each_backend_drawn() {
+    let dir = tempfile::tempdir().unwrap();
+    let setups = analysis::analyse(&records());
+    let drawn = figures::draw_setup(&setups[0], dir.path(), "setup-1").unwrap();
+    assert_eq!(drawn.len(), 4);
+    for (figure, path) in drawn {
+        let image = image::open(&path).unwrap().to_rgb8();
+        assert_eq!(image.dimensions(), (900, 560), "{figure:?}");
+        let count = |rgb: [u8; 3]| image.pixels().filter(|p| p.0 == rgb).count();
+        // Each backend's colour, used in every figure: lines, markers and legend.
+        for (backend, rgb) in [("rayon", [0x1f, 0x77, 0xb4]), ("mpi", [0xd6, 0x27, 0x28])] {
+            assert!(
+                count(rgb) > 200,
+                "{figure:?}: {backend} barely drawn ({})",
+                count(rgb)
+            );
+        }
+        let white = count([255, 255, 255]);
+        assert!(white < 900 * 560 * 98 / 100, "{figure:?} is nearly blank");
+    }
 }
 
 #[test]
 fn speedups_efficiencies_and_warnings_are_computed_from_the_medians() {
-    let text = report::markdown(&records(), "results/synthetic/");
+    let text = markdown(&records());
     // rayon at 2: S = 0.0102 / 0.0056 = 1.82, E = 91%; Karp–Flatt (1/1.82 − 1/2)/(1/2) = 0.098.
     assert!(
         text.contains("| rayon | 2 | 1.82 | 91% | 0.098 |"),
@@ -129,6 +166,6 @@ fn speedups_efficiencies_and_warnings_are_computed_from_the_medians() {
 
     let mut disagreeing = records();
     disagreeing[0].state_hash = "ffffffffffffffff".into();
-    let text = report::markdown(&disagreeing, "results/synthetic/");
+    let text = markdown(&disagreeing);
     assert!(text.contains("Warning: backends disagree"), "{text}");
 }

@@ -1,0 +1,246 @@
+//! The report's figures (PNG, plotters): time, speedup, efficiency and steps per second
+//! against workers, one colour per backend in every figure, error bars from the
+//! repetitions, log axes. Text uses an embedded DejaVu Sans, so no system font is needed.
+
+use std::path::{Path, PathBuf};
+use std::sync::Once;
+
+use anyhow::{Context, anyhow};
+use plotters::prelude::*;
+
+use crate::analysis::{BackendScaling, Setup};
+
+const FONT: &str = "sans-serif";
+const SIZE: (u32, u32) = (900, 560);
+
+/// What a figure plots against workers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Figure {
+    /// Median seconds per run, min–max bars (the seed's Figure 6).
+    Time,
+    /// S(p), with the ideal S = p.
+    Speedup,
+    /// E(p), with the 75% line the findings use.
+    Efficiency,
+    /// Median steps per second (the seed's Figure 5).
+    Fps,
+}
+
+impl Figure {
+    pub const ALL: [Figure; 4] = [
+        Figure::Time,
+        Figure::Speedup,
+        Figure::Efficiency,
+        Figure::Fps,
+    ];
+
+    pub fn file_stem(self) -> &'static str {
+        match self {
+            Figure::Time => "time",
+            Figure::Speedup => "speedup",
+            Figure::Efficiency => "efficiency",
+            Figure::Fps => "fps",
+        }
+    }
+
+    fn title(self) -> &'static str {
+        match self {
+            Figure::Time => "Time per run",
+            Figure::Speedup => "Speedup",
+            Figure::Efficiency => "Parallel efficiency",
+            Figure::Fps => "Steps per second",
+        }
+    }
+
+    fn axis(self) -> &'static str {
+        match self {
+            Figure::Time => "seconds per run (median, min–max)",
+            Figure::Speedup => "speedup S(p) = T(baseline) / T(p)",
+            Figure::Efficiency => "efficiency E(p) = S(p) / p",
+            Figure::Fps => "steps per second (median)",
+        }
+    }
+
+    /// Where strong-scaling curves leave room: time rises and speedup stays below the
+    /// ideal line on the right; efficiency and steps per second start high on the left.
+    fn legend_position(self) -> SeriesLabelPosition {
+        match self {
+            Figure::Time | Figure::Speedup => SeriesLabelPosition::UpperLeft,
+            Figure::Efficiency | Figure::Fps => SeriesLabelPosition::LowerLeft,
+        }
+    }
+
+    /// (low, median, high) of one point.
+    fn values(self, point: &crate::analysis::Point) -> (f64, f64, f64) {
+        match self {
+            Figure::Time => (point.min_s, point.median_s, point.max_s),
+            Figure::Speedup => (point.speedup, point.speedup, point.speedup),
+            Figure::Efficiency => (point.efficiency, point.efficiency, point.efficiency),
+            Figure::Fps => (point.fps, point.fps, point.fps),
+        }
+    }
+}
+
+/// One colour per backend, the same in every figure.
+fn colour(backend: &str) -> RGBColor {
+    match backend {
+        "serial" => RGBColor(0x33, 0x33, 0x33),
+        "rayon" => RGBColor(0x1f, 0x77, 0xb4),
+        "mpi" => RGBColor(0xd6, 0x27, 0x28),
+        _ => RGBColor(0x2c, 0xa0, 0x2c),
+    }
+}
+
+fn register_font() {
+    static FONT_ONCE: Once = Once::new();
+    FONT_ONCE.call_once(|| {
+        let bytes = include_bytes!("../assets/DejaVuSans.ttf");
+        // The embedded font is valid; failing here would be a build defect.
+        plotters::style::register_font(FONT, FontStyle::Normal, bytes)
+            .unwrap_or_else(|_| panic!("the embedded DejaVu Sans is a valid font"));
+    });
+}
+
+/// Draws every figure of `setup` into `dir` as `<prefix>-<figure>.png`; returns the paths.
+pub fn draw_setup(
+    setup: &Setup,
+    dir: &Path,
+    prefix: &str,
+) -> anyhow::Result<Vec<(Figure, PathBuf)>> {
+    register_font();
+    let mut drawn = Vec::new();
+    for figure in Figure::ALL {
+        let path = dir.join(format!("{prefix}-{}.png", figure.file_stem()));
+        draw(figure, setup, &path).with_context(|| format!("cannot draw {}", path.display()))?;
+        drawn.push((figure, path));
+    }
+    Ok(drawn)
+}
+
+fn draw(figure: Figure, setup: &Setup, path: &Path) -> anyhow::Result<()> {
+    let backends: Vec<&BackendScaling> = setup
+        .backends
+        .iter()
+        .filter(|b| b.points.iter().any(|p| figure.values(p).1.is_finite()))
+        .collect();
+    let max_workers = backends
+        .iter()
+        .flat_map(|b| b.points.iter().map(|p| p.workers))
+        .max()
+        .unwrap_or(1)
+        .max(2) as f64;
+    let values: Vec<f64> = backends
+        .iter()
+        .flat_map(|b| b.points.iter())
+        .flat_map(|p| {
+            let (low, mid, high) = figure.values(p);
+            [low, mid, high]
+        })
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .collect();
+    let (mut low, mut high) = values
+        .iter()
+        .fold((f64::INFINITY, 0.0_f64), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    if !low.is_finite() {
+        (low, high) = (0.1, 1.0);
+    }
+    match figure {
+        // The ideal line reaches p; the 75% line and 100% must show.
+        Figure::Speedup => high = high.max(max_workers),
+        Figure::Efficiency => high = high.max(1.0),
+        _ => {}
+    }
+    let (y_low, y_high) = (low / 1.5, high * 1.5);
+
+    let root = BitMapBackend::new(path, SIZE).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let caption = format!(
+        "{}: {} (n = {}, {} steps)",
+        figure.title(),
+        setup.scene,
+        setup.n,
+        setup.steps
+    );
+    let mut chart = ChartBuilder::on(&root)
+        .caption(caption, (FONT, 24))
+        .margin(16)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d(
+            (0.8_f64..max_workers * 1.25).log_scale(),
+            (y_low..y_high).log_scale(),
+        )
+        .map_err(|e| anyhow!("{e}"))?;
+    chart
+        .configure_mesh()
+        .x_desc("workers (threads or ranks, log scale)")
+        .y_desc(figure.axis())
+        .axis_desc_style((FONT, 18))
+        .label_style((FONT, 15))
+        .y_labels(6)
+        .light_line_style(BLACK.mix(0.04))
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.3}"))
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    match figure {
+        Figure::Speedup => {
+            let ideal = [(1.0, 1.0), (max_workers, max_workers)];
+            chart
+                .draw_series(LineSeries::new(ideal, BLACK.mix(0.4).stroke_width(1)))
+                .map_err(|e| anyhow!("{e}"))?
+                .label("ideal S = p")
+                .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.mix(0.4)));
+        }
+        Figure::Efficiency => {
+            let floor = [(0.8, 0.75), (max_workers * 1.25, 0.75)];
+            chart
+                .draw_series(LineSeries::new(floor, BLACK.mix(0.4).stroke_width(1)))
+                .map_err(|e| anyhow!("{e}"))?
+                .label("75%")
+                .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.mix(0.4)));
+        }
+        _ => {}
+    }
+    for backend in backends {
+        let colour = colour(&backend.backend);
+        let points: Vec<(f64, (f64, f64, f64))> = backend
+            .points
+            .iter()
+            .map(|p| (p.workers as f64, figure.values(p)))
+            .filter(|(_, (_, mid, _))| mid.is_finite() && *mid > 0.0)
+            .collect();
+        chart
+            .draw_series(LineSeries::new(
+                points.iter().map(|&(x, (_, mid, _))| (x, mid)),
+                colour.stroke_width(2),
+            ))
+            .map_err(|e| anyhow!("{e}"))?
+            .label(backend.backend.as_str())
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2)));
+        chart
+            .draw_series(points.iter().map(|&(x, (lo, mid, hi))| {
+                ErrorBar::new_vertical(x, lo, mid, hi, colour.filled(), 8)
+            }))
+            .map_err(|e| anyhow!("{e}"))?;
+        chart
+            .draw_series(
+                points
+                    .iter()
+                    .map(|&(x, (_, mid, _))| Circle::new((x, mid), 4, colour.filled())),
+            )
+            .map_err(|e| anyhow!("{e}"))?;
+    }
+    chart
+        .configure_series_labels()
+        .position(figure.legend_position())
+        .label_font((FONT, 15))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    root.present().map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}
