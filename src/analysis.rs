@@ -74,23 +74,19 @@ pub struct Setup {
 
 /// The successful records grouped into setups, each analysed per backend.
 pub fn analyse(records: &[Record]) -> Vec<Setup> {
+    // In order of first appearance, which is the manifest's order.
+    let mut order: Vec<String> = Vec::new();
     let mut setups: BTreeMap<String, Vec<&Record>> = BTreeMap::new();
     for record in records.iter().filter(|r| r.status == STATUS_OK) {
-        let key = format!(
-            "{}|{:020}|{:020}|{}|{}|{:?}|{}",
-            record.scene,
-            record.n,
-            record.steps,
-            record.dt.to_bits(),
-            record.packing.to_bits(),
-            record.seed,
-            record.broadphase
-        );
+        let key = record.setup_key();
+        if !setups.contains_key(&key) {
+            order.push(key.clone());
+        }
         setups.entry(key).or_default().push(record);
     }
-    setups
-        .into_values()
-        .map(|rows| analyse_setup(&rows))
+    order
+        .iter()
+        .map(|key| analyse_setup(&setups[key]))
         .collect()
 }
 

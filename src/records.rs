@@ -209,6 +209,24 @@ impl Record {
     }
 }
 
+impl Record {
+    /// The physical setup a run computed (scene, n, steps, dt, seed, packing, broad
+    /// phase), whatever the backend: runs with the same setup must end in the same state.
+    pub fn setup_key(&self) -> String {
+        format!(
+            "{} n={} steps={} dt={} seed={} packing={:.4} broadphase={}",
+            self.scene,
+            self.n,
+            self.steps,
+            self.dt,
+            self.seed
+                .map_or_else(|| "none".to_owned(), |s| s.to_string()),
+            self.packing,
+            self.broadphase
+        )
+    }
+}
+
 /// The current UTC time, RFC 3339 to the second.
 pub fn utc_now() -> String {
     let seconds = std::time::SystemTime::now()

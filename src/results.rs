@@ -100,18 +100,8 @@ pub fn table(records: &[Record]) -> String {
 fn hash_agreement(records: &[Record]) -> String {
     let mut setups: BTreeMap<String, BTreeMap<&str, Vec<String>>> = BTreeMap::new();
     for record in records.iter().filter(|r| r.status == STATUS_OK) {
-        let setup = format!(
-            "{} n={} steps={} dt={} seed={:?} packing={:.4} broadphase={}",
-            record.scene,
-            record.n,
-            record.steps,
-            record.dt,
-            record.seed,
-            record.packing,
-            record.broadphase
-        );
         setups
-            .entry(setup)
+            .entry(record.setup_key())
             .or_default()
             .entry(&record.state_hash)
             .or_default()
