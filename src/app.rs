@@ -5,13 +5,13 @@ use std::num::NonZeroUsize;
 use anyhow::{Context, bail};
 
 use crate::backend::{BackendSpec, RunOutcome, serial, threads};
-use crate::cli::{BackendName, Cli, Command, ReportArgs, RunArgs, SimulateArgs};
+use crate::cli::{BackendName, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs};
 use crate::output::{write_atomically, write_state_csv};
 use crate::runner::RunOptions;
 use crate::scene_file;
 #[cfg(feature = "mpi")]
 use crate::summary::RunSummary;
-use crate::{analysis, figures, manifest, report, results, runner};
+use crate::{analysis, figures, manifest, render, report, results, runner};
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
@@ -22,8 +22,43 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             Ok(())
         }
         Command::Report(args) => write_report(&args),
+        Command::Render(args) => render_scene(&args),
     }
 }
+
+fn render_scene(args: &RenderArgs) -> anyhow::Result<()> {
+    if args.png.is_none() && args.gif.is_none() {
+        bail!(
+            "nothing to draw; add --png FILE (the disks after the run) and/or --gif FILE (the run)"
+        );
+    }
+    let spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
+    let prepared = spec
+        .prepare()
+        .with_context(|| format!("{}", args.scene.display()))?;
+    if let Some(path) = &args.png {
+        render::png_after_run(&prepared, path)?;
+        println!(
+            "{} disks after {} steps drawn to {}",
+            prepared.scene.particles.len(),
+            prepared.steps,
+            path.display()
+        );
+    }
+    if let Some(path) = &args.gif {
+        render::gif_of_run(&prepared, path, args.frames)?;
+        println!(
+            "{} steps animated in {} frames to {}",
+            prepared.steps,
+            args.frames,
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// The scene picture a report links when it lies beside it (`collide render --png`).
+const SCENE_PICTURE: &str = "scene.png";
 
 fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
     let records = results::load(&args.path)?;
@@ -39,7 +74,13 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
         )
     })?;
     let setups = analysis::analyse(&records);
-    let mut figures = Vec::with_capacity(setups.len());
+    let mut pictures = report::Pictures {
+        figures: Vec::with_capacity(setups.len()),
+        scene: out
+            .join(SCENE_PICTURE)
+            .exists()
+            .then(|| SCENE_PICTURE.to_owned()),
+    };
     for (index, setup) in setups.iter().enumerate() {
         let drawn = figures::draw_setup(setup, &out, &format!("setup-{}", index + 1))?;
         let names = drawn
@@ -49,14 +90,14 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
                 (figure, name.unwrap_or_default())
             })
             .collect();
-        figures.push(names);
+        pictures.figures.push(names);
     }
     let path = out.join("report.md");
     let text = report::markdown(
         &records,
         &setups,
         &args.path.display().to_string(),
-        &figures,
+        &pictures,
     );
     write_atomically(&path, |file| file.write_all(text.as_bytes()))?;
     println!("report written to {}", path.display());
@@ -100,7 +141,7 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
 
 fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let backend = backend_spec(args)?;
-    let spec = scene_file::load(&args.scene, &args.overrides())?;
+    let spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
     let context = || format!("{}", args.scene.display());
     let finished = match backend {
         BackendSpec::Serial => Finished::Here(serial::run(&spec).with_context(context)?),

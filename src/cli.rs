@@ -29,6 +29,25 @@ pub enum Command {
     Results(ResultsArgs),
     /// Write a markdown scaling report of a study's recorded runs.
     Report(ReportArgs),
+    /// Draw a scene: a PNG of its disks after the run, and/or a GIF of the run.
+    Render(RenderArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// Scene file (TOML), e.g. experiments/scenes/seed-1000.toml.
+    pub scene: PathBuf,
+    /// Write a PNG of the disks after the scene's steps (`--steps 1`: nearly the start).
+    #[arg(long, value_name = "FILE")]
+    pub png: Option<PathBuf>,
+    /// Write an animated GIF of the run, from the start to the last step.
+    #[arg(long, value_name = "FILE")]
+    pub gif: Option<PathBuf>,
+    /// Frames of the GIF, spread evenly over the run.
+    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(2..=1000))]
+    pub frames: u32,
+    #[command(flatten)]
+    pub overrides: OverrideArgs,
 }
 
 #[derive(Debug, Args)]
@@ -71,24 +90,8 @@ pub struct SimulateArgs {
     /// Write the final state as CSV (id,x,y,vx,vy,radius,mass) to FILE.
     #[arg(long, value_name = "FILE")]
     pub dump: Option<PathBuf>,
-    /// Number of disks (random scenes).
-    #[arg(long, allow_hyphen_values = true)]
-    pub n: Option<i64>,
-    /// Number of steps.
-    #[arg(long, allow_hyphen_values = true)]
-    pub steps: Option<i64>,
-    /// Seed of the random initial state.
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// Time step, or "auto".
-    #[arg(long, value_parser = parse_dt, allow_hyphen_values = true)]
-    pub dt: Option<DtValue>,
-    /// Area fraction of disks (random scenes; the box becomes square).
-    #[arg(long, allow_hyphen_values = true)]
-    pub packing: Option<f64>,
-    /// Broad phase: grid (default) or allpairs (the seed's O(N²) search).
-    #[arg(long, value_parser = parse_broadphase)]
-    pub broadphase: Option<Broadphase>,
+    #[command(flatten)]
+    pub overrides: OverrideArgs,
     /// How to run the steps: serial (the reference), rayon (threads) or mpi (ranks).
     #[arg(long, value_enum, default_value_t = BackendName::Serial)]
     pub backend: BackendName,
@@ -114,7 +117,30 @@ pub enum BackendName {
     Mpi,
 }
 
-impl SimulateArgs {
+/// Flags that replace a scene file's values.
+#[derive(Debug, Args)]
+pub struct OverrideArgs {
+    /// Number of disks (random scenes).
+    #[arg(long, allow_hyphen_values = true)]
+    pub n: Option<i64>,
+    /// Number of steps.
+    #[arg(long, allow_hyphen_values = true)]
+    pub steps: Option<i64>,
+    /// Seed of the random initial state.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Time step, or "auto".
+    #[arg(long, value_parser = parse_dt, allow_hyphen_values = true)]
+    pub dt: Option<DtValue>,
+    /// Area fraction of disks (random scenes; the box becomes square).
+    #[arg(long, allow_hyphen_values = true)]
+    pub packing: Option<f64>,
+    /// Broad phase: grid (default) or allpairs (the seed's O(N²) search).
+    #[arg(long, value_parser = parse_broadphase)]
+    pub broadphase: Option<Broadphase>,
+}
+
+impl OverrideArgs {
     pub fn overrides(&self) -> Overrides {
         Overrides {
             n: self.n,

@@ -13,6 +13,7 @@ pub mod manifest;
 pub mod output;
 pub mod process;
 pub mod records;
+pub mod render;
 pub mod report;
 pub mod results;
 pub mod runner;

@@ -16,15 +16,18 @@ const SEED_MPI_12_S: f64 = 2.16;
 /// Parallel efficiency below this is called out in the findings.
 const EFFICIENCY_FLOOR: f64 = 0.75;
 
+/// What a report shows besides the records: where they came from and its pictures.
+#[derive(Clone, Debug, Default)]
+pub struct Pictures {
+    /// `figures[i]`: the PNG files (relative to the report) of setup i.
+    pub figures: Vec<Vec<(Figure, String)>>,
+    /// A picture of the scene (`collide render --png`), if one lies beside the report.
+    pub scene: Option<String>,
+}
+
 /// The report of one study's records, analysed into `setups` ([`crate::analysis::analyse`]);
-/// `source` names where they were read from, `figures[i]` the PNG files (relative to the
-/// report) of setup i.
-pub fn markdown(
-    records: &[Record],
-    setups: &[Setup],
-    source: &str,
-    figures: &[Vec<(Figure, String)>],
-) -> String {
+/// `source` names where they were read from.
+pub fn markdown(records: &[Record], setups: &[Setup], source: &str, pictures: &Pictures) -> String {
     let mut out = String::new();
     let Some(first) = records.first() else {
         return "# Empty study\n\nNo records.\n".to_owned();
@@ -35,11 +38,21 @@ pub fn markdown(
         "Regenerate with `collide run experiments/{}.toml`, then `collide report {source}`.\n",
         first.study
     );
+    if let Some(scene) = &pictures.scene {
+        let _ = writeln!(
+            out,
+            "The scene picture comes from `collide render SCENE --png {scene}` in the report's folder.\n"
+        );
+        let _ = writeln!(
+            out,
+            "![The scene: disks to scale, coloured by speed from blue (at rest) to red (twice the rms speed)]({scene})\n"
+        );
+    }
     environment(&mut out, first, records);
     warnings(&mut out, records, setups);
     for (index, setup) in setups.iter().enumerate() {
         setup_section(&mut out, setup);
-        for (figure, file) in figures.get(index).into_iter().flatten() {
+        for (figure, file) in pictures.figures.get(index).into_iter().flatten() {
             let _ = writeln!(out, "![{}]({file})\n", figure.file_stem());
         }
     }

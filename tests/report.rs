@@ -113,7 +113,11 @@ fn markdown(records: &[Record]) -> String {
                 .collect()
         })
         .collect();
-    report::markdown(records, &setups, "results/synthetic/", &figures)
+    let pictures = report::Pictures {
+        figures,
+        scene: Some("scene.png".into()),
+    };
+    report::markdown(records, &setups, "results/synthetic/", &pictures)
 }
 
 #[test]
@@ -168,4 +172,43 @@ fn speedups_efficiencies_and_warnings_are_computed_from_the_medians() {
     disagreeing[0].state_hash = "ffffffffffffffff".into();
     let text = markdown(&disagreeing);
     assert!(text.contains("Warning: backends disagree"), "{text}");
+}
+
+#[test]
+fn render_draws_the_disks_as_a_png_and_the_run_as_a_gif() {
+    use image::AnimationDecoder;
+
+    let dir = tempfile::tempdir().unwrap();
+    let (png, gif) = (dir.path().join("scene.png"), dir.path().join("run.gif"));
+    let out = crate::cli::collide(&[
+        "render",
+        "experiments/scenes/seed-1000.toml",
+        "--n",
+        "2000",
+        "--steps",
+        "40",
+        "--frames",
+        "5",
+        "--png",
+        png.to_str().unwrap(),
+        "--gif",
+        gif.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let picture = image::open(&png).unwrap().to_rgb8();
+    // A square box: 800 pixels and a 10-pixel margin each side.
+    assert_eq!(picture.dimensions(), (820, 820));
+    let coloured = picture.pixels().filter(|p| p.0 != [255, 255, 255]).count();
+    // 2000 disks at packing 0.05 cover about 5% of the box, plus its outline.
+    assert!(coloured > 800 * 800 / 40, "only {coloured} coloured pixels");
+    let file = std::fs::File::open(&gif).unwrap();
+    let frames = image::codecs::gif::GifDecoder::new(std::io::BufReader::new(file))
+        .unwrap()
+        .into_frames()
+        .count();
+    assert_eq!(frames, 5);
 }
