@@ -90,8 +90,8 @@ pub fn run_with_timeout(mut command: Command, timeout: Duration) -> std::io::Res
             _ => thread::sleep(Duration::from_millis(10)),
         }
     };
-    // Whatever the child left in its group goes too (a launcher's stray ranks).
-    signal_group(group, Signal::KILL);
+    // No group signal after a normal exit: the child is reaped, so its pid (the group
+    // id) may already belong to someone else.
     if let Ok(mut running) = RUNNING.lock() {
         running.remove(&group);
     }
