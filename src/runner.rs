@@ -198,20 +198,14 @@ pub fn run_study(
                 status,
                 stdout,
                 stderr,
-            }) => {
-                let summary = stdout
-                    .lines()
-                    .last()
-                    .and_then(|line| serde_json::from_str::<RunSummary>(line).ok());
-                match summary {
-                    Some(summary) if status.success() => Record::measured(&context, &summary),
-                    _ => Record::failed(
-                        &context,
-                        STATUS_FAILED,
-                        format!("{status}{}", tail("its output", &stderr)),
-                    ),
-                }
-            }
+            }) => match RunSummary::from_last_line(&stdout) {
+                Ok(summary) if status.success() => Record::measured(&context, &summary),
+                _ => Record::failed(
+                    &context,
+                    STATUS_FAILED,
+                    format!("{status}{}", tail("its output", &stderr)),
+                ),
+            },
         };
         if record.status == STATUS_OK {
             measured += 1;

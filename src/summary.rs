@@ -60,6 +60,13 @@ pub struct RunSummary {
     pub state_hash: String,
 }
 
+impl RunSummary {
+    /// The summary `collide simulate --json` prints on the last line of its output.
+    pub fn from_last_line(stdout: &str) -> serde_json::Result<RunSummary> {
+        serde_json::from_str(stdout.lines().last().unwrap_or_default())
+    }
+}
+
 impl fmt::Display for RunSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let dt_rule = self.dt_auto_fraction.map_or_else(String::new, |fraction| {

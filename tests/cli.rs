@@ -12,6 +12,15 @@ pub fn collide(args: &[&str]) -> Output {
         .expect("the collide binary runs")
 }
 
+/// The JSON summary of `collide ARGS --json`, which must succeed.
+pub fn json_summary(args: &[&str]) -> serde_json::Value {
+    let out = collide(&[args, &["--json"]].concat());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{args:?} failed: {stderr}");
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
+}
+
 pub fn scene_file(dir: &Path, name: &str, text: &str) -> PathBuf {
     let path = dir.join(name);
     std::fs::write(&path, text).unwrap();
@@ -82,10 +91,9 @@ fn json_is_one_object_on_the_last_line_with_the_stable_fields() {
 
 #[test]
 fn overrides_replace_scene_values() {
-    let out = collide(&[
+    let json = json_summary(&[
         "simulate",
         SEED_SCENE,
-        "--json",
         "--n",
         "200",
         "--steps",
@@ -97,19 +105,6 @@ fn overrides_replace_scene_values() {
         "--dt",
         "auto",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let json: serde_json::Value = serde_json::from_str(
-        String::from_utf8(out.stdout)
-            .unwrap()
-            .lines()
-            .last()
-            .unwrap(),
-    )
-    .unwrap();
     assert_eq!(json["n"], 200);
     assert_eq!(json["steps"], 10);
     assert_eq!(json["seed"], 9);
@@ -282,12 +277,7 @@ fn rayon_prints_the_serial_hash_and_its_worker_counts() {
     let dir = tempfile::tempdir().unwrap();
     let path = scene_file(dir.path(), "gas.toml", GAS);
     let path = path.to_str().unwrap();
-    let summary = |extra: &[&str]| {
-        let out = collide(&[&["simulate", path, "--json"], extra].concat());
-        assert!(out.status.success());
-        let stdout = String::from_utf8(out.stdout).unwrap();
-        serde_json::from_str::<serde_json::Value>(stdout.lines().last().unwrap()).unwrap()
-    };
+    let summary = |extra: &[&str]| json_summary(&[&["simulate", path], extra].concat());
     let serial = summary(&[]);
     let rayon = summary(&["--backend", "rayon", "--threads", "3"]);
     assert_eq!(rayon["state_hash"], serial["state_hash"]);

@@ -4,16 +4,7 @@
 use std::os::unix::fs::PermissionsExt;
 use std::time::{Duration, Instant};
 
-use crate::cli::{collide, scene_file};
-
-/// The JSON summary a successful run prints on its last line.
-fn summary(args: &[&str]) -> serde_json::Value {
-    let out = collide(&[args, &["--json"]].concat());
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{args:?} failed: {stderr}");
-    let stdout = String::from_utf8(out.stdout).unwrap();
-    serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
-}
+use crate::cli::{collide, json_summary as summary, scene_file};
 
 #[test]
 fn mpi_at_1_2_3_and_4_ranks_gives_the_serial_hash() {

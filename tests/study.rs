@@ -9,7 +9,7 @@ use collide::environment::Environment;
 use collide::records::{self, Record, RecordContext, STATUS_TIMED_OUT};
 use collide::summary::RunSummary;
 
-use crate::cli::{collide, scene_file};
+use crate::cli::{collide, json_summary, scene_file};
 
 const SCENE: &str = "[scene]\nn = 200\npacking = 0.1\nseed = 3\n[method]\ndt = 0.1\nsteps = 20\n";
 
@@ -194,21 +194,13 @@ fn sample_records() -> Vec<Record> {
         environment: &environment,
         study_started_utc: "2026-11-22T00:00:00Z",
     };
-    let out = collide(&[
+    let json = json_summary(&[
         "simulate",
         "experiments/scenes/seed-1000.toml",
-        "--json",
         "--steps",
         "10",
     ]);
-    let summary: RunSummary = serde_json::from_str(
-        String::from_utf8(out.stdout)
-            .unwrap()
-            .lines()
-            .last()
-            .unwrap(),
-    )
-    .unwrap();
+    let summary: RunSummary = serde_json::from_value(json).unwrap();
     vec![
         Record::measured(&context, &summary),
         Record::failed(&context, STATUS_TIMED_OUT, "killed after 1 s".into()),

@@ -78,8 +78,7 @@ pub fn launch(launch: &Launch, args: &[OsString]) -> Result<RunSummary, BackendE
             tail("its output", &stderr)
         )));
     }
-    let last_line = stdout.lines().last().unwrap_or_default();
-    serde_json::from_str(last_line).map_err(|e| {
+    RunSummary::from_last_line(&stdout).map_err(|e| {
         BackendError::Mpi(format!(
             "rank 0 printed no JSON summary on its last line ({e}){}",
             tail("its output", &stdout)

@@ -179,8 +179,7 @@ impl ThreadedStepper {
         self.crossing.clear();
         match self.params.broadphase {
             Broadphase::Grid => {
-                self.build_grid(particles);
-                let bands = self.grid.bands(self.n_bands);
+                let bands = self.build_grid(particles);
                 let n_bands = bands.len();
                 self.contacts.resize_with(n_bands, Vec::new);
                 self.handed_over.resize_with(n_bands, Vec::new);
@@ -217,9 +216,12 @@ impl ThreadedStepper {
 
     /// The grid build, band by band, and every [`REORDER_INTERVAL`] builds the disks
     /// re-stored in grid order (in parallel), exactly when the serial stepper does it.
-    fn build_grid(&mut self, particles: &mut Particles) {
-        if self.grid.len() != particles.len() {
+    /// Returns the bands it used, cut by the disk counts before the refresh (a first
+    /// build, from scratch, cuts them afterwards): the pair scan uses the same bands.
+    fn build_grid(&mut self, particles: &mut Particles) -> Vec<Range<usize>> {
+        let bands = if self.grid.len() != particles.len() {
             self.grid.build(particles);
+            self.grid.bands(self.n_bands)
         } else {
             let bands = self.grid.bands(self.n_bands);
             let layout = *self.grid.layout();
@@ -237,7 +239,8 @@ impl ThreadedStepper {
             slices
                 .par_iter_mut()
                 .for_each(|(first, band)| receive_band(band, *first, &movers));
-        }
+            bands
+        };
         self.builds_since_reorder += 1;
         if self.builds_since_reorder >= REORDER_INTERVAL {
             let strips = self.grid.owned_strips_mut();
@@ -261,6 +264,7 @@ impl ThreadedStepper {
                 .for_each(|(strip, first_slot)| number_slots(strip, first_slot));
             self.builds_since_reorder = 0;
         }
+        bands
     }
 
     /// The seed's O(N²) search with its rows split over the pool; the pairs are then
