@@ -4,8 +4,12 @@
 
 use std::collections::BTreeMap;
 
-use crate::records::{Record, STATUS_OK};
-use crate::results::median;
+use polars::prelude::{
+    Column, DataFrame, DataType, IntoLazy, PolarsResult, StringChunked, col, len,
+};
+
+use crate::manifest::Scaling;
+use crate::records::{self, Record, STATUS_OK};
 
 /// One backend at one worker count.
 #[derive(Clone, Debug, PartialEq)]
@@ -18,11 +22,13 @@ pub struct Point {
     /// Median steps per second.
     pub fps: f64,
     pub oversubscribed: bool,
-    /// T(baseline) / T(p), with [`Setup::baseline`].
+    /// Strong scaling: T(baseline) / T(p), with [`Setup::baseline`]. Weak scaling: the
+    /// scaled speedup p·E(p).
     pub speedup: f64,
-    /// speedup / p.
+    /// Strong scaling: speedup / p. Weak scaling: T(1, N₀) / T(p, p·N₀).
     pub efficiency: f64,
-    /// Karp–Flatt e(p) = (1/S − 1/p)/(1 − 1/p); undefined (NaN) at p = 1.
+    /// Karp–Flatt e(p) = (1/S − 1/p)/(1 − 1/p); undefined (NaN) at p = 1 and for weak
+    /// scaling.
     pub karp_flatt: f64,
 }
 
@@ -52,15 +58,17 @@ pub struct BackendScaling {
     pub baseline: Baseline,
     /// By worker count.
     pub points: Vec<Point>,
-    /// With at least two worker counts.
+    /// Strong scaling with at least two worker counts.
     pub amdahl: Option<AmdahlFit>,
 }
 
 /// One physical setup (same scene, n, steps, dt, packing, seed, broad phase) under every
-/// backend that ran it.
+/// backend that ran it; for weak scaling, the setups whose n is N₀ × workers.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Setup {
     pub scene: String,
+    pub scaling: Scaling,
+    /// Disks; for weak scaling N₀, the disks per worker.
     pub n: u64,
     pub steps: u64,
     pub dt: f64,
@@ -68,26 +76,148 @@ pub struct Setup {
     pub broadphase: String,
     /// Serial first, then rayon, then MPI.
     pub backends: Vec<BackendScaling>,
-    /// Distinct final-state hashes among the successful runs (1 means all agree).
+    /// The most distinct final-state hashes among the successful runs of one physical
+    /// setup (1 means all backends agree).
     pub distinct_hashes: usize,
 }
 
-/// The successful records grouped into setups, each analysed per backend.
-pub fn analyse(records: &[Record]) -> Vec<Setup> {
-    // In order of first appearance, which is the manifest's order.
-    let mut order: Vec<String> = Vec::new();
-    let mut setups: BTreeMap<String, Vec<&Record>> = BTreeMap::new();
-    for record in records.iter().filter(|r| r.status == STATUS_OK) {
-        let key = record.setup_key();
-        if !setups.contains_key(&key) {
-            order.push(key.clone());
-        }
-        setups.entry(key).or_default().push(record);
-    }
-    order
+/// The successful records grouped into setups (in the manifest's order), each analysed
+/// per backend. The grouping, medians and spreads are polars aggregations.
+pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {
+    let ok: Vec<Record> = records
         .iter()
-        .map(|key| analyse_setup(&setups[key]))
-        .collect()
+        .filter(|r| r.status == STATUS_OK)
+        .cloned()
+        .collect();
+    let frame = keyed_frame(&ok)?;
+    let points = per_configuration(&frame)?;
+    let hashes = distinct_hashes_per_series(&frame)?;
+    let first_of_series = |series: &str| {
+        ok.iter()
+            .find(|r| r.series_key() == series)
+            .expect("every series comes from a record")
+    };
+    let mut setups: Vec<Setup> = Vec::new();
+    let mut series_order: Vec<String> = Vec::new();
+    for (series, backend, point) in points {
+        let index = match series_order.iter().position(|s| *s == series) {
+            Some(index) => index,
+            None => {
+                let first = first_of_series(&series);
+                let scaling = if first.scaling == Scaling::Weak.name() {
+                    Scaling::Weak
+                } else {
+                    Scaling::Strong
+                };
+                series_order.push(series.clone());
+                setups.push(Setup {
+                    scene: first.scene.clone(),
+                    scaling,
+                    n: match scaling {
+                        Scaling::Strong => first.n,
+                        Scaling::Weak => first.n / first.workers.max(1),
+                    },
+                    steps: first.steps,
+                    dt: first.dt,
+                    packing: first.packing,
+                    broadphase: first.broadphase.clone(),
+                    backends: Vec::new(),
+                    distinct_hashes: hashes.get(&series).copied().unwrap_or(1),
+                });
+                setups.len() - 1
+            }
+        };
+        let setup = &mut setups[index];
+        match setup.backends.iter_mut().find(|b| b.backend == backend) {
+            Some(scaling) => scaling.points.push(point),
+            None => setup.backends.push(BackendScaling {
+                backend,
+                baseline: Baseline::Missing,
+                points: vec![point],
+                amdahl: None,
+            }),
+        }
+    }
+    for setup in &mut setups {
+        derive_scaling(setup);
+    }
+    Ok(setups)
+}
+
+/// The records as a polars table, with each row's series (what one scaling curve
+/// shares) and physical setup (what must end in the same state) as key columns.
+fn keyed_frame(records: &[Record]) -> PolarsResult<DataFrame> {
+    let mut frame = records::to_frame(records)?;
+    let series: Vec<String> = records.iter().map(Record::series_key).collect();
+    let setup: Vec<String> = records.iter().map(Record::setup_key).collect();
+    frame.with_column(Column::new("series".into(), series))?;
+    frame.with_column(Column::new("setup".into(), setup))?;
+    Ok(frame)
+}
+
+/// Median, min and max time, repetitions and median FPS per (series, backend, workers),
+/// in first-seen order: (series, backend, point without its derived ratios).
+fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Point)>> {
+    let table = frame
+        .clone()
+        .lazy()
+        .group_by_stable([col("series"), col("backend"), col("workers")])
+        .agg([
+            col("wall_s").median().alias("median_s"),
+            col("wall_s").min().alias("min_s"),
+            col("wall_s").max().alias("max_s"),
+            len().cast(DataType::UInt64).alias("reps"),
+            col("fps").median().alias("fps"),
+            col("oversubscribed").any(true).alias("oversubscribed"),
+        ])
+        .collect()?;
+    let series = table.column("series")?.str()?;
+    let backend = table.column("backend")?.str()?;
+    let workers = table.column("workers")?.u64()?;
+    let median_s = table.column("median_s")?.f64()?;
+    let min_s = table.column("min_s")?.f64()?;
+    let max_s = table.column("max_s")?.f64()?;
+    let reps = table.column("reps")?.u64()?;
+    let fps = table.column("fps")?.f64()?;
+    let oversubscribed = table.column("oversubscribed")?.bool()?;
+    Ok((0..table.height())
+        .map(|i| {
+            let point = Point {
+                workers: workers.get(i).unwrap_or_default(),
+                reps: reps.get(i).unwrap_or_default() as usize,
+                median_s: median_s.get(i).unwrap_or(f64::NAN),
+                min_s: min_s.get(i).unwrap_or(f64::NAN),
+                max_s: max_s.get(i).unwrap_or(f64::NAN),
+                fps: fps.get(i).unwrap_or(f64::NAN),
+                oversubscribed: oversubscribed.get(i).unwrap_or_default(),
+                speedup: f64::NAN,
+                efficiency: f64::NAN,
+                karp_flatt: f64::NAN,
+            };
+            let text = |column: &StringChunked| column.get(i).unwrap_or_default().to_owned();
+            (text(series), text(backend), point)
+        })
+        .collect())
+}
+
+/// Per series, the most distinct `state_hash`es of any one physical setup in it.
+fn distinct_hashes_per_series(frame: &DataFrame) -> PolarsResult<BTreeMap<String, usize>> {
+    let table = frame
+        .clone()
+        .lazy()
+        .group_by([col("series"), col("setup")])
+        .agg([col("state_hash")
+            .n_unique()
+            .cast(DataType::UInt64)
+            .alias("hashes")])
+        .group_by([col("series")])
+        .agg([col("hashes").max()])
+        .collect()?;
+    let series = table.column("series")?.str()?;
+    let hashes = table.column("hashes")?.u64()?;
+    Ok((0..table.height())
+        .filter_map(|i| Some((series.get(i)?.to_owned(), hashes.get(i)? as usize)))
+        .collect())
 }
 
 fn backend_rank(backend: &str) -> usize {
@@ -99,89 +229,55 @@ fn backend_rank(backend: &str) -> usize {
     }
 }
 
-fn analyse_setup(rows: &[&Record]) -> Setup {
-    let mut by_backend: BTreeMap<(usize, String), BTreeMap<u64, Vec<&Record>>> = BTreeMap::new();
-    for row in rows {
-        by_backend
-            .entry((backend_rank(&row.backend), row.backend.clone()))
-            .or_default()
-            .entry(row.workers)
-            .or_default()
-            .push(row);
+/// Orders a setup's backends and points, picks each backend's baseline and derives
+/// speedup, efficiency, Karp–Flatt and the Amdahl fit from the medians.
+fn derive_scaling(setup: &mut Setup) {
+    setup.backends.sort_by_key(|b| backend_rank(&b.backend));
+    for backend in &mut setup.backends {
+        backend.points.sort_by_key(|p| p.workers);
     }
-    let serial_median = by_backend
+    let one_worker = |backend: &BackendScaling| {
+        backend
+            .points
+            .iter()
+            .find(|p| p.workers == 1)
+            .map(|p| p.median_s)
+    };
+    let serial = setup
+        .backends
         .iter()
-        .find(|((_, name), _)| name == "serial")
-        .and_then(|(_, points)| points.get(&1))
-        .map(|runs| median(&mut runs.iter().map(|r| r.wall_s).collect::<Vec<_>>()));
-    let backends = by_backend
-        .into_iter()
-        .map(|((_, backend), points)| {
-            let medians: BTreeMap<u64, f64> = points
-                .iter()
-                .map(|(&p, runs)| {
-                    (
-                        p,
-                        median(&mut runs.iter().map(|r| r.wall_s).collect::<Vec<_>>()),
-                    )
-                })
-                .collect();
-            let baseline = match (serial_median, medians.get(&1)) {
-                (Some(t), _) => Baseline::Serial(t),
-                (None, Some(&t)) => Baseline::OneWorker(t),
-                (None, None) => Baseline::Missing,
-            };
-            let t_base = match baseline {
-                Baseline::Serial(t) | Baseline::OneWorker(t) => t,
-                Baseline::Missing => f64::NAN,
-            };
-            let points: Vec<Point> = points
-                .iter()
-                .map(|(&workers, runs)| {
-                    let mut times: Vec<f64> = runs.iter().map(|r| r.wall_s).collect();
-                    let median_s = median(&mut times);
-                    let speedup = t_base / median_s;
-                    let p = workers as f64;
-                    Point {
-                        workers,
-                        reps: runs.len(),
-                        median_s,
-                        min_s: times[0],
-                        max_s: times[times.len() - 1],
-                        fps: median(&mut runs.iter().map(|r| r.fps).collect::<Vec<_>>()),
-                        oversubscribed: runs.iter().any(|r| r.oversubscribed),
-                        speedup,
-                        efficiency: speedup / p,
-                        karp_flatt: if workers > 1 {
-                            (1.0 / speedup - 1.0 / p) / (1.0 - 1.0 / p)
-                        } else {
-                            f64::NAN
-                        },
-                    }
-                })
-                .collect();
-            let amdahl = amdahl_fit(&points);
-            BackendScaling {
-                backend,
-                baseline,
-                points,
-                amdahl,
+        .find(|b| b.backend == "serial")
+        .and_then(one_worker);
+    let weak = setup.scaling == Scaling::Weak;
+    for backend in &mut setup.backends {
+        backend.baseline = match (serial, one_worker(backend)) {
+            (Some(t), _) => Baseline::Serial(t),
+            (None, Some(t)) => Baseline::OneWorker(t),
+            (None, None) => Baseline::Missing,
+        };
+        let t_base = match backend.baseline {
+            Baseline::Serial(t) | Baseline::OneWorker(t) => t,
+            Baseline::Missing => f64::NAN,
+        };
+        for point in &mut backend.points {
+            let p = point.workers as f64;
+            if weak {
+                // Each worker has N₀ disks: ideal time stays T(1, N₀).
+                point.efficiency = t_base / point.median_s;
+                point.speedup = p * point.efficiency;
+            } else {
+                point.speedup = t_base / point.median_s;
+                point.efficiency = point.speedup / p;
+                if point.workers > 1 {
+                    point.karp_flatt = (1.0 / point.speedup - 1.0 / p) / (1.0 - 1.0 / p);
+                }
             }
-        })
-        .collect();
-    let first = rows[0];
-    let mut hashes: Vec<&str> = rows.iter().map(|r| r.state_hash.as_str()).collect();
-    hashes.sort_unstable();
-    hashes.dedup();
-    Setup {
-        scene: first.scene.clone(),
-        n: first.n,
-        steps: first.steps,
-        dt: first.dt,
-        packing: first.packing,
-        broadphase: first.broadphase.clone(),
-        backends,
-        distinct_hashes: hashes.len(),
+        }
+        backend.amdahl = if weak {
+            None
+        } else {
+            amdahl_fit(&backend.points)
+        };
     }
 }
 

@@ -73,7 +73,7 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
             out.display()
         )
     })?;
-    let setups = analysis::analyse(&records);
+    let setups = analysis::analyse(&records)?;
     let mut pictures = report::Pictures {
         figures: Vec::with_capacity(setups.len()),
         scene: out

@@ -9,6 +9,7 @@ use anyhow::{Context, anyhow};
 use plotters::prelude::*;
 
 use crate::analysis::{BackendScaling, Setup};
+use crate::manifest::Scaling;
 
 const FONT: &str = "sans-serif";
 const SIZE: (u32, u32) = (900, 560);
@@ -52,12 +53,14 @@ impl Figure {
         }
     }
 
-    fn axis(self) -> &'static str {
-        match self {
-            Figure::Time => "seconds per run (median, min–max)",
-            Figure::Speedup => "speedup S(p) = T(baseline) / T(p)",
-            Figure::Efficiency => "efficiency E(p) = S(p) / p",
-            Figure::Fps => "steps per second (median)",
+    fn axis(self, scaling: Scaling) -> &'static str {
+        match (self, scaling) {
+            (Figure::Time, _) => "seconds per run (median, min–max)",
+            (Figure::Speedup, Scaling::Strong) => "speedup S(p) = T(baseline) / T(p)",
+            (Figure::Speedup, Scaling::Weak) => "scaled speedup p·E(p)",
+            (Figure::Efficiency, Scaling::Strong) => "efficiency E(p) = S(p) / p",
+            (Figure::Efficiency, Scaling::Weak) => "weak efficiency T(1, N₀) / T(p, p·N₀)",
+            (Figure::Fps, _) => "steps per second (median)",
         }
     }
 
@@ -123,12 +126,13 @@ fn draw(figure: Figure, setup: &Setup, path: &Path) -> anyhow::Result<()> {
         .iter()
         .filter(|b| b.points.iter().any(|p| figure.values(p).1.is_finite()))
         .collect();
-    let max_workers = backends
+    let mut workers: Vec<u64> = backends
         .iter()
         .flat_map(|b| b.points.iter().map(|p| p.workers))
-        .max()
-        .unwrap_or(1)
-        .max(2) as f64;
+        .collect();
+    workers.sort_unstable();
+    workers.dedup();
+    let max_workers = workers.last().copied().unwrap_or(1).max(2) as f64;
     let values: Vec<f64> = backends
         .iter()
         .flat_map(|b| b.points.iter())
@@ -156,27 +160,34 @@ fn draw(figure: Figure, setup: &Setup, path: &Path) -> anyhow::Result<()> {
 
     let root = BitMapBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let n = match setup.scaling {
+        Scaling::Strong => format!("n = {}", setup.n),
+        Scaling::Weak => format!("n = {} per worker", setup.n),
+    };
     let caption = format!(
-        "{}: {} (n = {}, {} steps)",
+        "{}: {} ({n}, {} steps)",
         figure.title(),
         setup.scene,
-        setup.n,
         setup.steps
     );
+    // Ticks at the measured worker counts: a log axis' own ticks skip most of them.
+    let x_ticks: Vec<f64> = workers.iter().map(|&p| p as f64).collect();
     let mut chart = ChartBuilder::on(&root)
         .caption(caption, (FONT, 24))
         .margin(16)
         .x_label_area_size(50)
         .y_label_area_size(80)
         .build_cartesian_2d(
-            (0.8_f64..max_workers * 1.25).log_scale(),
+            (0.8_f64..max_workers * 1.25)
+                .log_scale()
+                .with_key_points(x_ticks),
             (y_low..y_high).log_scale(),
         )
         .map_err(|e| anyhow!("{e}"))?;
     chart
         .configure_mesh()
         .x_desc("workers (threads or ranks, log scale)")
-        .y_desc(figure.axis())
+        .y_desc(figure.axis(setup.scaling))
         .axis_desc_style((FONT, 18))
         .label_style((FONT, 15))
         .y_labels(6)

@@ -41,6 +41,16 @@ pub enum Scaling {
     Weak,
 }
 
+impl Scaling {
+    /// The name used in manifests and records.
+    pub fn name(self) -> &'static str {
+        match self {
+            Scaling::Strong => "strong",
+            Scaling::Weak => "weak",
+        }
+    }
+}
+
 /// Where a configuration's scene comes from.
 #[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum SceneInput {

@@ -10,10 +10,24 @@ use polars::prelude::{
 };
 
 use crate::environment::Environment;
+use crate::manifest::Scaling;
 use crate::output::write_atomically;
 use crate::summary::RunSummary;
 
-pub const SCHEMA_VERSION: u32 = 1;
+pub const SCHEMA_VERSION: u32 = 2;
+
+/// A value a column takes in files written before the column existed.
+#[derive(Clone, Copy, Debug)]
+enum Fill {
+    Str(&'static str),
+}
+
+/// Columns added after version 1, each with the version that added it and what older
+/// files implicitly meant: reading an older file adds them with that value.
+const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
+    // Version 1 studies could be weak only through their manifest; records assumed strong.
+    (2, "scaling", Fill::Str("strong")),
+];
 
 /// What became of one run.
 pub const STATUS_OK: &str = "ok";
@@ -32,6 +46,8 @@ pub struct Record {
     /// [`crate::manifest::Configuration::key`].
     pub config_key: String,
     pub scene: String,
+    /// `strong` (n fixed) or `weak` (n grows with the workers): how the study scaled.
+    pub scaling: String,
     pub repetition: u32,
     pub status: String,
     pub error: String,
@@ -95,6 +111,8 @@ pub struct RecordContext<'a> {
     pub build_id: &'a str,
     pub config_key: &'a str,
     pub scene: &'a str,
+    /// `strong` or `weak`.
+    pub scaling: &'a str,
     pub backend: &'a str,
     pub workers: u64,
     pub repetition: u32,
@@ -155,6 +173,7 @@ impl Record {
             build_id: context.build_id.to_owned(),
             config_key: context.config_key.to_owned(),
             scene: context.scene.to_owned(),
+            scaling: context.scaling.to_owned(),
             repetition: context.repetition,
             status: status.to_owned(),
             error,
@@ -213,10 +232,23 @@ impl Record {
     /// The physical setup a run computed (scene, n, steps, dt, seed, packing, broad
     /// phase), whatever the backend: runs with the same setup must end in the same state.
     pub fn setup_key(&self) -> String {
+        self.key_with_n(&format!("n={}", self.n))
+    }
+
+    /// The runs one scaling curve compares: the setup, except that in a weak-scaling
+    /// study n grows with the workers, so the curve is keyed by n per worker.
+    pub fn series_key(&self) -> String {
+        if self.scaling == Scaling::Weak.name() {
+            self.key_with_n(&format!("weak n/worker={}", self.n / self.workers.max(1)))
+        } else {
+            self.setup_key()
+        }
+    }
+
+    fn key_with_n(&self, n: &str) -> String {
         format!(
-            "{} n={} steps={} dt={} seed={} packing={:.4} broadphase={}",
+            "{} {n} steps={} dt={} seed={} packing={:.4} broadphase={}",
             self.scene,
-            self.n,
             self.steps,
             self.dt,
             self.seed
@@ -260,7 +292,7 @@ fn civil_from_days(days: i64) -> (i64, u32, u32) {
 macro_rules! for_each_column {
     ($apply:ident) => {
         $apply!(
-            str: study, manifest_hash, build_id, config_key, scene, status, error, backend,
+            str: study, manifest_hash, build_id, config_key, scene, scaling, status, error, backend,
                  boundary, broadphase, state_hash, hostname, cpu_model, os, rustc, profile,
                  features, git_commit, mpi_library, study_started_utc, finished_utc;
             u64: threads, ranks, workers, n, steps, pair_collisions, wall_collisions,
@@ -307,14 +339,18 @@ pub fn from_frame(frame: &DataFrame) -> anyhow::Result<Vec<Record>> {
         .u32()
         .context("`schema_version` is not an unsigned integer: not a collide results file")?
         .get(0);
-    if let Some(version) = version
-        && version != SCHEMA_VERSION
-    {
-        bail!(
-            "results schema version {version}, but this collide reads version {SCHEMA_VERSION}; \
-             use the collide that wrote them, or re-run the study"
-        );
-    }
+    let upgraded;
+    let frame = match version {
+        Some(version) if version > SCHEMA_VERSION => bail!(
+            "results schema version {version} is newer than this collide's ({SCHEMA_VERSION}); \
+             read them with the collide that wrote them, or a newer one"
+        ),
+        Some(version) if version < SCHEMA_VERSION => {
+            upgraded = upgrade(frame, version)?;
+            &upgraded
+        }
+        _ => frame,
+    };
     let column = |name: &str| {
         frame.column(name).with_context(|| {
             format!("no `{name}` column: not a collide results file, or a damaged one")
@@ -343,6 +379,21 @@ pub fn from_frame(frame: &DataFrame) -> anyhow::Result<Vec<Record>> {
         }};
     }
     Ok(for_each_column!(read))
+}
+
+/// A table of an older schema version with the columns added since then, each filled
+/// with what the older files meant ([`ADDED_COLUMNS`]).
+fn upgrade(frame: &DataFrame, version: u32) -> anyhow::Result<DataFrame> {
+    let mut frame = frame.clone();
+    for &(added_in, name, fill) in ADDED_COLUMNS {
+        if added_in > version && frame.column(name).is_err() {
+            let column = match fill {
+                Fill::Str(value) => Column::new(name.into(), vec![value; frame.height()]),
+            };
+            frame.with_column(column)?;
+        }
+    }
+    Ok(frame)
 }
 
 /// Writes the records to `path` atomically (Parquet, zstd).

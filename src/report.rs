@@ -6,6 +6,7 @@ use std::fmt::Write as _;
 
 use crate::analysis::{Baseline, Setup};
 use crate::figures::Figure;
+use crate::manifest::Scaling;
 use crate::records::{Record, STATUS_OK};
 
 /// The seed report's Cuadro 1: 1000 disks, 400 cycles.
@@ -132,9 +133,13 @@ fn warnings(out: &mut String, records: &[Record], setups: &[Setup]) {
 }
 
 fn describe(setup: &Setup) -> String {
+    let n = match setup.scaling {
+        Scaling::Strong => format!("n = {}", setup.n),
+        Scaling::Weak => format!("weak scaling, n = {} × workers", setup.n),
+    };
     format!(
-        "scene `{}`, n = {}, {} steps of dt = {}, packing {:.3}, {} broad phase",
-        setup.scene, setup.n, setup.steps, setup.dt, setup.packing, setup.broadphase
+        "scene `{}`, {n}, {} steps of dt = {}, packing {:.3}, {} broad phase",
+        setup.scene, setup.steps, setup.dt, setup.packing, setup.broadphase
     )
 }
 
@@ -192,6 +197,16 @@ fn setup_section(out: &mut String, setup: &Setup) {
     );
 
     let _ = writeln!(out, "### Speedup, efficiency and FPS\n");
+    if setup.scaling == Scaling::Weak {
+        let _ = writeln!(
+            out,
+            "Weak scaling: each worker has {} disks, so the ideal time stays that of one worker. \
+             Efficiency is E(p) = T(1, N₀)/T(p, p·N₀); speedup is the scaled speedup p·E(p) \
+             (Gustafson); Karp–Flatt and Amdahl's law describe strong scaling and are not \
+             given.\n",
+            setup.n
+        );
+    }
     for backend in &setup.backends {
         let baseline = match backend.baseline {
             Baseline::Serial(t) => format!("the serial backend ({t:.4} s)"),

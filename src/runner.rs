@@ -173,6 +173,7 @@ pub fn run_study(
             build_id: &build_id,
             config_key: &key,
             scene: &configuration.scene,
+            scaling: study.scaling.name(),
             backend: configuration.backend_name(),
             workers: configuration.workers as u64,
             repetition: rep,

@@ -25,9 +25,9 @@ fn environment() -> Environment {
     }
 }
 
-fn summary(backend: &str, threads: usize, ranks: usize, wall_s: f64) -> RunSummary {
+fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -> RunSummary {
     RunSummary {
-        n: 1000,
+        n,
         steps: 400,
         dt: 0.1,
         dt_auto_fraction: None,
@@ -43,7 +43,7 @@ fn summary(backend: &str, threads: usize, ranks: usize, wall_s: f64) -> RunSumma
         wall_s,
         setup_s: 0.001,
         fps: 400.0 / wall_s,
-        particle_steps_per_s: 400_000.0 / wall_s,
+        particle_steps_per_s: (n * 400) as f64 / wall_s,
         integration_s: 0.1 * wall_s,
         broad_phase_s: 0.6 * wall_s,
         collision_s: 0.2 * wall_s,
@@ -60,8 +60,14 @@ fn summary(backend: &str, threads: usize, ranks: usize, wall_s: f64) -> RunSumma
 }
 
 /// Serial at 1; rayon and MPI at 1, 2, 4 (4 oversubscribed on 2 cores): three
-/// repetitions each, the middle one the median.
+/// repetitions each, the middle one the median. Strong scaling: 1000 disks throughout.
 fn records() -> Vec<Record> {
+    study_records("strong")
+}
+
+/// The runs of [`records`] as a study of `scaling`; a weak one has n = 1000 × workers
+/// and times that grow with the work.
+fn study_records(scaling: &str) -> Vec<Record> {
     let environment = environment();
     let runs: [(&str, usize, [f64; 3]); 7] = [
         ("serial", 1, [0.0100, 0.0102, 0.0110]),
@@ -82,6 +88,7 @@ fn records() -> Vec<Record> {
                 build_id: "b",
                 config_key: &key,
                 scene: "seed-1000",
+                scaling,
                 backend,
                 workers: workers as u64,
                 repetition,
@@ -93,10 +100,12 @@ fn records() -> Vec<Record> {
             } else {
                 (workers, 1)
             };
-            let wall_s = times[repetition as usize];
+            // Weak scaling: p workers do p times the work of one.
+            let work = if scaling == "weak" { workers } else { 1 };
+            let wall_s = times[repetition as usize] * work as f64;
             records.push(Record::measured(
                 &context,
-                &summary(backend, threads, ranks, wall_s),
+                &summary(backend, threads, ranks, 1000 * work, wall_s),
             ));
         }
     }
@@ -104,7 +113,7 @@ fn records() -> Vec<Record> {
 }
 
 fn markdown(records: &[Record]) -> String {
-    let setups = analysis::analyse(records);
+    let setups = analysis::analyse(records).unwrap();
     let figures: Vec<Vec<(Figure, String)>> = (1..=setups.len())
         .map(|i| {
             Figure::ALL
@@ -128,7 +137,7 @@ fn the_report_of_fixed_records_matches_its_snapshot() {
 #[test]
 fn every_figure_is_a_png_of_the_stated_size_with_each_backend_drawn() {
     let dir = tempfile::tempdir().unwrap();
-    let setups = analysis::analyse(&records());
+    let setups = analysis::analyse(&records()).unwrap();
     let drawn = figures::draw_setup(&setups[0], dir.path(), "setup-1").unwrap();
     assert_eq!(drawn.len(), 4);
     for (figure, path) in drawn {
@@ -211,4 +220,98 @@ fn render_draws_the_disks_as_a_png_and_the_run_as_a_gif() {
         .into_frames()
         .count();
     assert_eq!(frames, 5);
+}
+
+#[test]
+fn weak_scaling_efficiency_is_the_one_worker_time_over_the_p_worker_time() {
+    let records = study_records("weak");
+    let text = markdown(&records);
+    // One setup, keyed by n per worker, though n differs at every worker count.
+    assert_eq!(text.matches("### Speedup").count(), 1, "{text}");
+    assert!(text.contains("weak scaling, n = 1000 × workers"), "{text}");
+    // rayon at 2: E = T(1, 1000) / T(2, 2000) = 0.0102 / 0.0112 = 91%, scaled speedup 2·E.
+    assert!(text.contains("| rayon | 2 | 1.82 | 91% | — |"), "{text}");
+    assert!(text.contains("Gustafson"), "{text}");
+    assert!(!text.contains("Amdahl fit"), "{text}");
+}
+
+/// Writes `records` as a Parquet file in `dir`, after `edit` changed the table.
+fn parquet_with(
+    dir: &std::path::Path,
+    records: &[Record],
+    edit: impl FnOnce(&mut polars::prelude::DataFrame),
+) -> std::path::PathBuf {
+    use polars::prelude::ParquetWriter;
+    let mut frame = collide::records::to_frame(records).unwrap();
+    edit(&mut frame);
+    let path = dir.join("study.parquet");
+    let file = std::fs::File::create(&path).unwrap();
+    ParquetWriter::new(file).finish(&mut frame).unwrap();
+    path
+}
+
+#[test]
+fn a_version_1_file_without_the_scaling_column_is_reported_as_strong_scaling() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = parquet_with(dir.path(), &records(), |frame| {
+        frame.drop_in_place("scaling").unwrap();
+        let version =
+            polars::prelude::Column::new("schema_version".into(), vec![1u32; frame.height()]);
+        frame.with_column(version).unwrap();
+    });
+    let out_dir = dir.path().join("report");
+    let out = crate::cli::collide(&[
+        "report",
+        path.to_str().unwrap(),
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(out_dir.join("report.md")).unwrap();
+    assert!(
+        text.contains("| rayon | 2 | 1.82 | 91% | 0.098 |"),
+        "{text}"
+    );
+}
+
+#[test]
+fn a_file_missing_a_measured_column_or_from_a_newer_collide_is_refused_with_the_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&str, Box<dyn FnOnce(&mut polars::prelude::DataFrame)>); 2] = [
+        (
+            "no `wall_s` column",
+            Box::new(|frame| {
+                frame.drop_in_place("wall_s").unwrap();
+            }),
+        ),
+        (
+            "newer than this collide",
+            Box::new(|frame| {
+                let version = polars::prelude::Column::new(
+                    "schema_version".into(),
+                    vec![99u32; frame.height()],
+                );
+                frame.with_column(version).unwrap();
+            }),
+        ),
+    ];
+    for (reason, edit) in cases {
+        let path = parquet_with(dir.path(), &records(), edit);
+        let out = crate::cli::collide(&[
+            "report",
+            path.to_str().unwrap(),
+            "--out",
+            dir.path().to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains(reason) && stderr.contains("study.parquet"),
+            "{stderr}"
+        );
+    }
 }

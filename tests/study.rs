@@ -188,6 +188,7 @@ fn sample_records() -> Vec<Record> {
         build_id: "b",
         config_key: "k",
         scene: "seed",
+        scaling: "strong",
         backend: "rayon",
         workers: 2,
         repetition: 1,
