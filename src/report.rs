@@ -90,6 +90,23 @@ fn environment(out: &mut String, first: &Record, records: &[Record]) {
     let _ = writeln!(out, "| Commit | `{}`{dirty} |", first.git_commit);
     let _ = writeln!(out, "| MPI | {} |", first.mpi_library);
     let _ = writeln!(out, "| Started | {} |", first.study_started_utc);
+    // The machine's other work distorts timings: say how busy it was.
+    let busiest = records
+        .iter()
+        .map(|r| r.load_average)
+        .filter(|l| l.is_finite())
+        .fold(f64::NAN, f64::max);
+    let _ = writeln!(
+        out,
+        "| Load | 1-minute load average {:.2} at the start, at most {:.2} after a run, {} at the end |",
+        first.load_average_start,
+        busiest,
+        if first.load_average_end.is_finite() {
+            format!("{:.2}", first.load_average_end)
+        } else {
+            "not recorded (the study did not finish)".to_owned()
+        }
+    );
     let _ = writeln!(
         out,
         "| Runs | {ok} measured, {} failed |\n",
