@@ -89,13 +89,13 @@ pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {
         .filter(|r| r.status == STATUS_OK)
         .cloned()
         .collect();
-    let frame = keyed_frame(&ok)?;
+    let series_keys: Vec<String> = ok.iter().map(Record::series_key).collect();
+    let frame = keyed_frame(&ok, &series_keys)?;
     let points = per_configuration(&frame)?;
     let hashes = distinct_hashes_per_series(&frame)?;
     let first_of_series = |series: &str| {
-        ok.iter()
-            .find(|r| r.series_key() == series)
-            .expect("every series comes from a record")
+        let row = series_keys.iter().position(|key| key == series);
+        &ok[row.expect("every series comes from a record")]
     };
     let mut setups: Vec<Setup> = Vec::new();
     let mut series_order: Vec<String> = Vec::new();
@@ -146,11 +146,10 @@ pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {
 
 /// The records as a polars table, with each row's series (what one scaling curve
 /// shares) and physical setup (what must end in the same state) as key columns.
-fn keyed_frame(records: &[Record]) -> PolarsResult<DataFrame> {
+fn keyed_frame(records: &[Record], series_keys: &[String]) -> PolarsResult<DataFrame> {
     let mut frame = records::to_frame(records)?;
-    let series: Vec<String> = records.iter().map(Record::series_key).collect();
     let setup: Vec<String> = records.iter().map(Record::setup_key).collect();
-    frame.with_column(Column::new("series".into(), series))?;
+    frame.with_column(Column::new("series".into(), series_keys))?;
     frame.with_column(Column::new("setup".into(), setup))?;
     Ok(frame)
 }
