@@ -16,6 +16,8 @@ const SEED_SERIAL_S: f64 = 33.8;
 const SEED_MPI_12_S: f64 = 2.16;
 /// Parallel efficiency below this is called out in the findings.
 const EFFICIENCY_FLOOR: f64 = 0.75;
+/// Repetitions whose max/min time exceeds this are called noisy.
+const NOISY_SPREAD: f64 = 1.5;
 
 /// What a report shows besides the records: where they came from and its pictures.
 #[derive(Clone, Debug, Default)]
@@ -140,11 +142,50 @@ fn warnings(out: &mut String, records: &[Record], setups: &[Setup]) {
             describe(setup)
         );
     }
+    noise_warning(out, records, setups);
     let failed = records.iter().filter(|r| r.status != STATUS_OK).count();
     if failed > 0 {
         let _ = writeln!(
             out,
             "> **Warning: {failed} run(s) failed or timed out**; they are left out of every figure below.\n"
+        );
+    }
+}
+
+/// Calls out a study measured on a busy machine: a load average above the core count
+/// during the runs, or repetitions whose slowest took much longer than the fastest.
+fn noise_warning(out: &mut String, records: &[Record], setups: &[Setup]) {
+    let cores = records[0].logical_cores as f64;
+    let busiest = records
+        .iter()
+        .map(|r| r.load_average)
+        .filter(|l| l.is_finite())
+        .fold(0.0, f64::max);
+    let spread: Vec<String> = setups
+        .iter()
+        .flat_map(|setup| {
+            setup.backends.iter().flat_map(move |b| {
+                b.points
+                    .iter()
+                    .filter(|p| p.reps > 1 && p.max_s > NOISY_SPREAD * p.min_s)
+                    .map(move |p| format!("{} × {} at n = {}", b.backend, p.workers, setup.n))
+            })
+        })
+        .collect();
+    if busiest > cores || !spread.is_empty() {
+        let spread = if spread.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " The slowest repetition took over {NOISY_SPREAD}× the fastest for {}.",
+                spread.join(", ")
+            )
+        };
+        let _ = writeln!(
+            out,
+            "> **Warning: noisy measurements.** The 1-minute load average reached {busiest:.2} \
+             on {cores} logical cores during the study.{spread} Medians resist some of this, \
+             but speedups here are uncertain; re-run on a quiet machine to confirm them.\n"
         );
     }
 }

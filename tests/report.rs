@@ -181,6 +181,18 @@ fn speedups_efficiencies_and_warnings_are_computed_from_the_medians() {
     assert!(text.contains("33.8 s"), "{text}");
     assert!(!text.contains("disagree"), "{text}");
 
+    assert!(!text.contains("noisy"), "{text}");
+
+    // One serial repetition twice as slow as the fastest: the medians stand, the report
+    // says they were measured on a busy machine.
+    let mut noisy = records();
+    noisy[0].wall_s = 0.0200;
+    noisy[0].load_average = 3.5;
+    let text = markdown(&noisy);
+    assert!(text.contains("Warning: noisy measurements"), "{text}");
+    assert!(text.contains("reached 3.50 on 2 logical cores"), "{text}");
+    assert!(text.contains("for serial × 1 at n = 1000"), "{text}");
+
     let mut disagreeing = records();
     disagreeing[0].state_hash = "ffffffffffffffff".into();
     let text = markdown(&disagreeing);
