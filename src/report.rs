@@ -168,7 +168,12 @@ fn noise_warning(out: &mut String, records: &[Record], setups: &[Setup]) {
                 b.points
                     .iter()
                     .filter(|p| p.reps > 1 && p.max_s > NOISY_SPREAD * p.min_s)
-                    .map(move |p| format!("{} × {} at n = {}", b.backend, p.workers, setup.n))
+                    .map(move |p| {
+                        format!(
+                            "{} × {} (n = {}, packing {:.3})",
+                            b.backend, p.workers, setup.n, setup.packing
+                        )
+                    })
             })
         })
         .collect();
@@ -311,10 +316,12 @@ fn setup_section(out: &mut String, setup: &Setup) {
             })
         })
         .collect();
+    // A blank line ends the table, whatever follows it.
+    let _ = writeln!(out);
     if !fits.is_empty() {
         let _ = writeln!(
             out,
-            "\nAmdahl fit T(p) = T₁·(f + (1 − f)/p), least squares on the medians: {}. An R² \
+            "Amdahl fit T(p) = T₁·(f + (1 − f)/p), least squares on the medians: {}. An R² \
              far below 1 means Amdahl's law does not describe these times (oversubscription, \
              communication that grows with p).\n",
             fits.join("; ")

@@ -191,7 +191,10 @@ fn speedups_efficiencies_and_warnings_are_computed_from_the_medians() {
     let text = markdown(&noisy);
     assert!(text.contains("Warning: noisy measurements"), "{text}");
     assert!(text.contains("reached 3.50 on 2 logical cores"), "{text}");
-    assert!(text.contains("for serial × 1 at n = 1000"), "{text}");
+    assert!(
+        text.contains("for serial × 1 (n = 1000, packing 0.050)"),
+        "{text}"
+    );
 
     let mut disagreeing = records();
     disagreeing[0].state_hash = "ffffffffffffffff".into();
