@@ -300,7 +300,8 @@ fn a_version_1_file_without_the_scaling_column_is_reported_as_strong_scaling() {
 #[test]
 fn a_file_missing_a_measured_column_or_from_a_newer_collide_is_refused_with_the_reason() {
     let dir = tempfile::tempdir().unwrap();
-    let cases: [(&str, Box<dyn FnOnce(&mut polars::prelude::DataFrame)>); 2] = [
+    type Damage = Box<dyn FnOnce(&mut polars::prelude::DataFrame)>;
+    let cases: [(&str, Damage); 2] = [
         (
             "no `wall_s` column",
             Box::new(|frame| {
