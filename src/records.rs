@@ -64,6 +64,21 @@ pub struct Record {
     pub wall_collisions: u64,
     pub max_overlap: f64,
     pub state_hash: String,
+    /// `step` or `event`; `timing` or `accuracy` (see the JSON summary).
+    pub method: String,
+    pub observe: String,
+    /// Accuracy observables of the JSON summary; NaN (floats) or null (counts) where
+    /// the summary has null.
+    pub events_per_s: f64,
+    pub collision_rate: f64,
+    pub temperature: f64,
+    pub pressure: f64,
+    pub compressibility_z: f64,
+    pub missed_collisions: Option<u64>,
+    pub missed_collision_fraction: f64,
+    pub mean_overlap: f64,
+    pub energy_relative_error: f64,
+    pub collapse_guard_fired: Option<u64>,
     pub oversubscribed: bool,
     pub hostname: String,
     pub cpu_model: String,
@@ -132,6 +147,19 @@ impl Record {
         record.wall_collisions = summary.wall_collisions;
         record.max_overlap = summary.max_overlap;
         record.state_hash = summary.state_hash.clone();
+        record.method = summary.method.clone();
+        record.observe = summary.observe.clone();
+        let nan = |value: Option<f64>| value.unwrap_or(f64::NAN);
+        record.events_per_s = nan(summary.events_per_s);
+        record.collision_rate = nan(summary.collision_rate);
+        record.temperature = nan(summary.temperature);
+        record.pressure = nan(summary.pressure);
+        record.compressibility_z = nan(summary.compressibility_z);
+        record.missed_collisions = summary.missed_collisions;
+        record.missed_collision_fraction = nan(summary.missed_collision_fraction);
+        record.mean_overlap = nan(summary.mean_overlap);
+        record.energy_relative_error = nan(summary.energy_relative_error);
+        record.collapse_guard_fired = summary.collapse_guard_fired;
         record.oversubscribed = summary.oversubscribed;
         record
     }
@@ -187,6 +215,18 @@ impl Record {
             wall_collisions: 0,
             max_overlap: f64::NAN,
             state_hash: String::new(),
+            method: String::new(),
+            observe: String::new(),
+            events_per_s: f64::NAN,
+            collision_rate: f64::NAN,
+            temperature: f64::NAN,
+            pressure: f64::NAN,
+            compressibility_z: f64::NAN,
+            missed_collisions: None,
+            missed_collision_fraction: f64::NAN,
+            mean_overlap: f64::NAN,
+            energy_relative_error: f64::NAN,
+            collapse_guard_fired: None,
             oversubscribed: threads * ranks > env.logical_cores as u64,
             hostname: env.hostname.clone(),
             cpu_model: env.cpu_model.clone(),
@@ -262,7 +302,8 @@ macro_rules! for_each_column {
         $apply!(
             str: study, manifest_hash, build_id, config_key, scene, status, error, backend,
                  boundary, broadphase, state_hash, hostname, cpu_model, os, rustc, profile,
-                 features, git_commit, mpi_library, study_started_utc, finished_utc;
+                 features, git_commit, mpi_library, study_started_utc, finished_utc, method,
+                 observe;
             u64: threads, ranks, workers, n, steps, pair_collisions, wall_collisions,
                  logical_cores, physical_cores, memory_bytes;
             u32: repetition;
@@ -270,9 +311,11 @@ macro_rules! for_each_column {
                  broad_phase_s, collision_s, communication_s, kinetic_energy_initial,
                  kinetic_energy_final, momentum_initial_x, momentum_initial_y,
                  momentum_final_x, momentum_final_y, max_overlap, load_average_start,
-                 load_average, load_average_end;
+                 load_average, load_average_end, events_per_s, collision_rate, temperature,
+                 pressure, compressibility_z, missed_collision_fraction, mean_overlap,
+                 energy_relative_error;
             bool: oversubscribed, git_dirty;
-            opt_u64: seed
+            opt_u64: seed, missed_collisions, collapse_guard_fired
         )
     };
 }

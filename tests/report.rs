@@ -56,6 +56,20 @@ fn summary(backend: &str, threads: usize, ranks: usize, wall_s: f64) -> RunSumma
         wall_collisions: 182,
         max_overlap: 0.138,
         state_hash: "51a3e11e31576e81".into(),
+        method: "step".into(),
+        observe: "timing".into(),
+        events_per_s: None,
+        collision_rate: Some(0.0867),
+        temperature: Some(0.5),
+        pressure: Some(0.0041),
+        compressibility_z: Some(1.05),
+        missed_collisions: None,
+        missed_collision_fraction: None,
+        mean_overlap: Some(0.02),
+        energy_relative_error: Some(0.0),
+        collapse_guard_fired: None,
+        collapse_tc: None,
+        temperature_curve: None,
     }
 }
 
