@@ -70,6 +70,20 @@ impl CellList {
         row * self.n_cols + col
     }
 
+    /// Empties every cell.
+    pub fn clear(&mut self) {
+        self.head.fill(NONE);
+    }
+
+    /// Cells in all.
+    pub fn len(&self) -> usize {
+        self.head.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.head.is_empty()
+    }
+
     /// Adds disk `disk` to cell `cell`.
     #[inline]
     pub fn insert(&mut self, disk: u32, cell: usize) {
