@@ -283,15 +283,20 @@ fn event_and_small_step_methods_agree_on_a_dilute_gas() {
     assert!(relative(za, zb) < 0.05, "Z step {za}, event {zb}");
 }
 
+/// A scene file in a fresh temporary folder, which lives as long as the returned guard.
+fn temp_scene(name: &str, text: &str) -> (tempfile::TempDir, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_scene(dir.path(), name, text);
+    (dir, path.to_str().unwrap().to_owned())
+}
+
 #[test]
 fn the_event_method_refuses_gravity_and_parallel_backends_with_clear_errors() {
-    let dir = tempfile::tempdir().unwrap();
-    let falling = write_scene(
-        dir.path(),
+    let (_dir, falling) = temp_scene(
         "falling.toml",
         "[scene]\nn = 10\npacking = 0.1\ngravity = [0.0, -9.81]\n[method]\nmethod = \"event\"\nsteps = 5\n",
     );
-    let out = run_collide(&["simulate", falling.to_str().unwrap()]);
+    let out = run_collide(&["simulate", &falling]);
     assert_eq!(out.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -313,17 +318,21 @@ fn the_event_method_refuses_gravity_and_parallel_backends_with_clear_errors() {
     assert!(stderr.contains("serial backend only"), "{stderr}");
 }
 
+/// The JSON summary of 50 steps of the seed scene with more flags.
+fn seed_scene_summary(flags: &[&str]) -> serde_json::Value {
+    let base = [
+        "simulate",
+        "experiments/scenes/seed-1000.toml",
+        "--steps",
+        "50",
+    ];
+    json_summary(&[&base[..], flags].concat())
+}
+
 #[test]
 fn the_json_summary_carries_the_accuracy_fields_of_both_methods() {
     for method in ["step", "event"] {
-        let json = json_summary(&[
-            "simulate",
-            "experiments/scenes/seed-1000.toml",
-            "--steps",
-            "50",
-            "--method",
-            method,
-        ]);
+        let json = seed_scene_summary(&["--method", method]);
         assert_eq!(json["method"], method);
         for field in [
             "collision_rate",
@@ -341,11 +350,7 @@ fn the_json_summary_carries_the_accuracy_fields_of_both_methods() {
         assert!(json["temperature_curve"].is_null());
         assert!(json["collapse_guard_fired"].is_null());
     }
-    let json = json_summary(&[
-        "simulate",
-        "experiments/scenes/seed-1000.toml",
-        "--steps",
-        "50",
+    let json = seed_scene_summary(&[
         "--method",
         "event",
         "--packing",
@@ -356,13 +361,11 @@ fn the_json_summary_carries_the_accuracy_fields_of_both_methods() {
         "0.5",
     ]);
     assert!(json["energy_relative_error"].as_f64().unwrap().abs() < 1e-12);
-    let dir = tempfile::tempdir().unwrap();
-    let cooling = write_scene(
-        dir.path(),
+    let (_dir, cooling) = temp_scene(
         "cooling.toml",
         "[scene]\nn = 500\npacking = 0.2\nrestitution = 0.8\nboundary = \"periodic\"\n[method]\nmethod = \"event\"\ndt = 0.5\nsteps = 100\n",
     );
-    let json = json_summary(&["simulate", cooling.to_str().unwrap()]);
+    let json = json_summary(&["simulate", &cooling]);
     let curve = json["temperature_curve"].as_array().unwrap();
     assert_eq!(curve.len(), 41);
     let first = curve[0][1].as_f64().unwrap();

@@ -32,9 +32,9 @@ impl Method {
 /// A running simulation of either method.
 #[derive(Clone, Debug)]
 pub enum Engine {
-    Step(Stepper),
+    Step(Box<Stepper>),
     Event {
-        sim: EventSim,
+        sim: Box<EventSim>,
         dt: f64,
         /// Intervals of dt done so far: the time is `done · dt`, never a running sum.
         done: u64,
@@ -44,9 +44,14 @@ pub enum Engine {
 impl Engine {
     pub fn new(scene: &Scene, method: Method, params: StepParams, event: EventParams) -> Engine {
         match method {
-            Method::Step => Engine::Step(Stepper::for_scene(scene, params)),
+            Method::Step => Engine::Step(Box::new(Stepper::for_scene(scene, params))),
             Method::Event => Engine::Event {
-                sim: EventSim::new(scene.domain, scene.physics, event, &scene.particles),
+                sim: Box::new(EventSim::new(
+                    scene.domain,
+                    scene.physics,
+                    event,
+                    &scene.particles,
+                )),
                 dt: params.dt,
                 done: 0,
             },
