@@ -188,6 +188,25 @@ fn inelastic_gas_cools_by_haffs_law_early_on() {
     assert!(sim.collapse_guard_fired() * 1000 < sim.counters().pair_collisions);
 }
 
+#[test]
+fn a_perfectly_inelastic_dense_gas_runs_to_the_end() {
+    // Regression: with e = 0 a pair is left touching at zero normal speed; rounding then
+    // made it "collide" again at once with zero impulse, forever. Such pairs are now
+    // touching, not colliding; clusters still collapse, and the TC guard acts.
+    let scene = periodic_gas(500, 0.6, 0.0, 10);
+    let (mut sim, mut particles) = event_sim(&scene);
+    let t0 = temperature(&particles);
+    sim.advance_to(&mut particles, 50.0);
+    assert!(sim.collapse_guard_fired() > 0);
+    assert!(temperature(&particles) < 0.1 * t0);
+    // Overlaps stay at rounding level.
+    assert!(
+        sim.counters().max_overlap < 1e-9,
+        "{}",
+        sim.counters().max_overlap
+    );
+}
+
 fn run_scene_text(text: &str, method: Method, observe: Observe) -> collide::summary::RunSummary {
     let overrides = Overrides {
         method: Some(method),

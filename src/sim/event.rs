@@ -613,6 +613,9 @@ fn permute<T: Copy>(values: &mut Vec<T>, order: &[u32], map: impl Fn(T) -> T) {
     *values = order.iter().map(|&old| map(values[old as usize])).collect();
 }
 
+/// Relative distance (of the squared contact distance) within which a pair counts as touching.
+const TOUCHING: f64 = 1e-10;
+
 /// Time until two disks at separation `(dx, dy)` (from a to b) with relative velocity
 /// `(dvx, dvy)` (b's minus a's) come within `contact`; infinite if they never do.
 /// Overlapping approaching pairs (rounding) collide at once; separating ones never.
@@ -623,7 +626,19 @@ pub fn contact_wait(dx: f64, dy: f64, dvx: f64, dvy: f64, contact: f64) -> f64 {
         return f64::INFINITY;
     }
     let v2 = dvx * dvx + dvy * dvy;
-    let c = dx * dx + dy * dy - contact * contact;
+    let distance_sq = dx * dx + dy * dy;
+    let c = distance_sq - contact * contact;
+    if c < TOUCHING * contact * contact {
+        // Touching to rounding: a collision now if the pair really approaches; none if
+        // its normal approach is rounding-sized (below 1e-9 of the relative speed), as
+        // for a pair that e = 0 left at zero normal speed, which must not collide with
+        // zero impulse again and again.
+        return if b * b > 1e-18 * v2 * distance_sq {
+            0.0
+        } else {
+            f64::INFINITY
+        };
+    }
     let discriminant = b * b - v2 * c;
     if discriminant < 0.0 {
         return f64::INFINITY;
@@ -676,6 +691,8 @@ mod tests {
         assert_eq!(contact_wait(20.0, 3.0, -2.0, 0.0, 2.0), f64::INFINITY);
         // Overlapping and approaching (rounding): at once.
         assert_eq!(contact_wait(1.9, 0.0, -1.0, 0.0, 2.0), 0.0);
+        // Touching and sliding with a rounding-sized normal approach: never.
+        assert_eq!(contact_wait(2.0, 0.0, -1e-17, 1.0, 2.0), f64::INFINITY);
     }
 
     #[test]
