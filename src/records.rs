@@ -251,10 +251,15 @@ impl Record {
 
 impl Record {
     /// The physical setup a run computed (scene, n, steps, dt, seed, packing, broad
-    /// phase), whatever the backend: runs with the same setup must end in the same state.
+    /// phase, and the method when it is not the default step method), whatever the
+    /// backend: runs with the same setup must end in the same state.
     pub fn setup_key(&self) -> String {
+        let method = match self.method.as_str() {
+            "" | "step" => String::new(),
+            other => format!(" method={other}"),
+        };
         format!(
-            "{} n={} steps={} dt={} seed={} packing={:.4} broadphase={}",
+            "{} n={} steps={} dt={} seed={} packing={:.4} broadphase={}{method}",
             self.scene,
             self.n,
             self.steps,
