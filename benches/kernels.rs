@@ -2,14 +2,17 @@
 //! and the contact resolution at N = 100,000, and one full step of the serial and the
 //! rayon (2 threads) backends at N = 1,000,000, for a dilute and a dense gas.
 //!
-//! Throughput is in disks per iteration, so criterion's "elem/s" is particle-steps per second.
+//! Throughput is in disks per iteration, so criterion's "elem/s" is particle-steps per second;
+//! in the `event` group it is collisions (pair and wall) per second of the event-driven
+//! method at N = 10^4 and 10^5 in a periodic box.
 //! Run: `cargo bench --bench kernels` (MPI runs need `mpirun`: see the README's Speed section).
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 
 use collide::backend::threads::ThreadedStepper;
+use collide::sim::event::{EventParams, EventSim};
 use collide::sim::scene::GasSpec;
-use collide::sim::{Broadphase, Particles, Scene, StepParams, Stepper};
+use collide::sim::{Boundary, Broadphase, Particles, Scene, StepParams, Stepper};
 
 /// r = 1 and v_rms = 1 stepped with dt = 0.1, so v_rms·dt = 0.1·r.
 const PARAMS: StepParams = StepParams {
@@ -90,5 +93,33 @@ fn backend_steps(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, serial_kernels, backend_steps);
+/// Event-driven throughput: each iteration processes a fixed number of collisions (pair
+/// and wall) of an elastic periodic gas after a warm-up of one collision per disk, so
+/// "elem/s" is collisions per second on one core (cell crossings are work, not counted).
+fn event_throughput(c: &mut Criterion) {
+    const COLLISIONS: u64 = 100_000;
+    let mut group = c.benchmark_group("event");
+    group.throughput(Throughput::Elements(COLLISIONS));
+    group.sample_size(10);
+    for n in [10_000, 100_000] {
+        for packing in [0.05, 0.3] {
+            let scene = GasSpec {
+                seed: 42,
+                boundary: Boundary::Periodic,
+                ..GasSpec::unit(n, packing)
+            }
+            .build()
+            .expect("packings below jamming place");
+            let params = EventParams { tc: 0.0 };
+            let mut sim = EventSim::new(scene.domain, scene.physics, params, &scene.particles);
+            sim.advance_collisions(n as u64);
+            group.bench_function(BenchmarkId::new(format!("n{n}"), packing), |b| {
+                b.iter(|| sim.advance_collisions(COLLISIONS));
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, serial_kernels, backend_steps, event_throughput);
 criterion_main!(benches);

@@ -9,6 +9,7 @@ use crate::cli::{BackendName, Cli, Command, RenderArgs, ReportArgs, RunArgs, Sim
 use crate::output::{write_atomically, write_state_csv};
 use crate::runner::RunOptions;
 use crate::scene_file;
+use crate::spec::Method;
 #[cfg(feature = "mpi")]
 use crate::summary::RunSummary;
 use crate::{analysis, figures, manifest, render, report, results, runner};
@@ -142,6 +143,14 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
 fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let backend = backend_spec(args)?;
     let spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
+    if spec.method.method == Method::Event && backend != BackendSpec::Serial {
+        bail!(
+            "{}: the event method runs on the serial backend only; drop --backend {} \
+             (and --threads/--ranks), or use --method step",
+            args.scene.display(),
+            args.backend.name()
+        );
+    }
     let context = || format!("{}", args.scene.display());
     let finished = match backend {
         BackendSpec::Serial => Finished::Here(serial::run(&spec).with_context(context)?),

@@ -7,6 +7,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use crate::scene_file::{DtValue, Overrides};
 use crate::sim::Broadphase;
+use crate::spec::{Method, Observe};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -117,6 +118,16 @@ pub enum BackendName {
     Mpi,
 }
 
+impl BackendName {
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendName::Serial => "serial",
+            BackendName::Rayon => "rayon",
+            BackendName::Mpi => "mpi",
+        }
+    }
+}
+
 /// Flags that replace a scene file's values.
 #[derive(Debug, Args)]
 pub struct OverrideArgs {
@@ -138,6 +149,14 @@ pub struct OverrideArgs {
     /// Broad phase: grid (default) or allpairs (the seed's O(N²) search).
     #[arg(long, value_parser = parse_broadphase)]
     pub broadphase: Option<Broadphase>,
+    /// Method: step (time steps of dt, the default) or event (the exact event-driven
+    /// reference; serial backend only).
+    #[arg(long, value_parser = parse_method)]
+    pub method: Option<Method>,
+    /// What to measure besides time: timing (default) or accuracy (also the step
+    /// method's exact missed-collision count, outside `wall_s`; serial backend only).
+    #[arg(long, value_parser = parse_observe)]
+    pub observe: Option<Observe>,
 }
 
 impl OverrideArgs {
@@ -149,6 +168,8 @@ impl OverrideArgs {
             dt: self.dt.clone(),
             packing: self.packing,
             broadphase: self.broadphase,
+            method: self.method,
+            observe: self.observe,
         }
     }
 }
@@ -181,5 +202,21 @@ fn parse_broadphase(text: &str) -> Result<Broadphase, String> {
         "grid" => Ok(Broadphase::Grid),
         "allpairs" => Ok(Broadphase::AllPairs),
         _ => Err(format!("expected grid or allpairs, got \"{text}\"")),
+    }
+}
+
+fn parse_method(text: &str) -> Result<Method, String> {
+    match text {
+        "step" => Ok(Method::Step),
+        "event" => Ok(Method::Event),
+        _ => Err(format!("expected step or event, got \"{text}\"")),
+    }
+}
+
+fn parse_observe(text: &str) -> Result<Observe, String> {
+    match text {
+        "timing" => Ok(Observe::Timing),
+        "accuracy" => Ok(Observe::Accuracy),
+        _ => Err(format!("expected timing or accuracy, got \"{text}\"")),
     }
 }

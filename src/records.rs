@@ -15,11 +15,17 @@ use crate::output::write_atomically;
 use crate::summary::RunSummary;
 
 pub const SCHEMA_VERSION: u32 = 2;
+/// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
+const OLDEST_READABLE_VERSION: u32 = 1;
 
 /// A value a column takes in files written before the column existed.
 #[derive(Clone, Copy, Debug)]
 enum Fill {
     Str(&'static str),
+    /// Not measured (NaN).
+    F64(f64),
+    /// Not measured (null).
+    NullU64,
 }
 
 /// Columns added after version 1, each with the version that added it and what older
@@ -27,6 +33,19 @@ enum Fill {
 const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     // Version 1 studies could be weak only through their manifest; records assumed strong.
     (2, "scaling", Fill::Str("strong")),
+    // Version 1 ran only the time-stepped method, timed, without accuracy observables.
+    (2, "method", Fill::Str("step")),
+    (2, "observe", Fill::Str("timing")),
+    (2, "events_per_s", Fill::F64(f64::NAN)),
+    (2, "collision_rate", Fill::F64(f64::NAN)),
+    (2, "temperature", Fill::F64(f64::NAN)),
+    (2, "pressure", Fill::F64(f64::NAN)),
+    (2, "compressibility_z", Fill::F64(f64::NAN)),
+    (2, "missed_collisions", Fill::NullU64),
+    (2, "missed_collision_fraction", Fill::F64(f64::NAN)),
+    (2, "mean_overlap", Fill::F64(f64::NAN)),
+    (2, "energy_relative_error", Fill::F64(f64::NAN)),
+    (2, "collapse_guard_fired", Fill::NullU64),
 ];
 
 /// What became of one run.
@@ -80,6 +99,21 @@ pub struct Record {
     pub wall_collisions: u64,
     pub max_overlap: f64,
     pub state_hash: String,
+    /// `step` or `event`; `timing` or `accuracy` (see the JSON summary).
+    pub method: String,
+    pub observe: String,
+    /// Accuracy observables of the JSON summary; NaN (floats) or null (counts) where
+    /// the summary has null.
+    pub events_per_s: f64,
+    pub collision_rate: f64,
+    pub temperature: f64,
+    pub pressure: f64,
+    pub compressibility_z: f64,
+    pub missed_collisions: Option<u64>,
+    pub missed_collision_fraction: f64,
+    pub mean_overlap: f64,
+    pub energy_relative_error: f64,
+    pub collapse_guard_fired: Option<u64>,
     pub oversubscribed: bool,
     pub hostname: String,
     pub cpu_model: String,
@@ -150,6 +184,19 @@ impl Record {
         record.wall_collisions = summary.wall_collisions;
         record.max_overlap = summary.max_overlap;
         record.state_hash = summary.state_hash.clone();
+        record.method = summary.method.clone();
+        record.observe = summary.observe.clone();
+        let nan = |value: Option<f64>| value.unwrap_or(f64::NAN);
+        record.events_per_s = nan(summary.events_per_s);
+        record.collision_rate = nan(summary.collision_rate);
+        record.temperature = nan(summary.temperature);
+        record.pressure = nan(summary.pressure);
+        record.compressibility_z = nan(summary.compressibility_z);
+        record.missed_collisions = summary.missed_collisions;
+        record.missed_collision_fraction = nan(summary.missed_collision_fraction);
+        record.mean_overlap = nan(summary.mean_overlap);
+        record.energy_relative_error = nan(summary.energy_relative_error);
+        record.collapse_guard_fired = summary.collapse_guard_fired;
         record.oversubscribed = summary.oversubscribed;
         record
     }
@@ -206,6 +253,18 @@ impl Record {
             wall_collisions: 0,
             max_overlap: f64::NAN,
             state_hash: String::new(),
+            method: String::new(),
+            observe: String::new(),
+            events_per_s: f64::NAN,
+            collision_rate: f64::NAN,
+            temperature: f64::NAN,
+            pressure: f64::NAN,
+            compressibility_z: f64::NAN,
+            missed_collisions: None,
+            missed_collision_fraction: f64::NAN,
+            mean_overlap: f64::NAN,
+            energy_relative_error: f64::NAN,
+            collapse_guard_fired: None,
             oversubscribed: threads * ranks > env.logical_cores as u64,
             hostname: env.hostname.clone(),
             cpu_model: env.cpu_model.clone(),
@@ -230,7 +289,8 @@ impl Record {
 
 impl Record {
     /// The physical setup a run computed (scene, n, steps, dt, seed, packing, broad
-    /// phase), whatever the backend: runs with the same setup must end in the same state.
+    /// phase, and the method when it is not the default step method), whatever the
+    /// backend: runs with the same setup must end in the same state.
     pub fn setup_key(&self) -> String {
         self.key_with_n(&format!("n={}", self.n))
     }
@@ -246,8 +306,12 @@ impl Record {
     }
 
     fn key_with_n(&self, n: &str) -> String {
+        let method = match self.method.as_str() {
+            "" | "step" => String::new(),
+            other => format!(" method={other}"),
+        };
         format!(
-            "{} {n} steps={} dt={} seed={} packing={:.4} broadphase={}",
+            "{} {n} steps={} dt={} seed={} packing={:.4} broadphase={}{method}",
             self.scene,
             self.steps,
             self.dt,
@@ -294,7 +358,8 @@ macro_rules! for_each_column {
         $apply!(
             str: study, manifest_hash, build_id, config_key, scene, scaling, status, error, backend,
                  boundary, broadphase, state_hash, hostname, cpu_model, os, rustc, profile,
-                 features, git_commit, mpi_library, study_started_utc, finished_utc;
+                 features, git_commit, mpi_library, study_started_utc, finished_utc, method,
+                 observe;
             u64: threads, ranks, workers, n, steps, pair_collisions, wall_collisions,
                  logical_cores, physical_cores, memory_bytes;
             u32: repetition;
@@ -302,9 +367,11 @@ macro_rules! for_each_column {
                  broad_phase_s, collision_s, communication_s, kinetic_energy_initial,
                  kinetic_energy_final, momentum_initial_x, momentum_initial_y,
                  momentum_final_x, momentum_final_y, max_overlap, load_average_start,
-                 load_average, load_average_end;
+                 load_average, load_average_end, events_per_s, collision_rate, temperature,
+                 pressure, compressibility_z, missed_collision_fraction, mean_overlap,
+                 energy_relative_error;
             bool: oversubscribed, git_dirty;
-            opt_u64: seed
+            opt_u64: seed, missed_collisions, collapse_guard_fired
         )
     };
 }
@@ -344,6 +411,10 @@ pub fn from_frame(frame: &DataFrame) -> anyhow::Result<Vec<Record>> {
         Some(version) if version > SCHEMA_VERSION => bail!(
             "results schema version {version} is newer than this collide's ({SCHEMA_VERSION}); \
              read them with the collide that wrote them, or a newer one"
+        ),
+        Some(version) if version < OLDEST_READABLE_VERSION => bail!(
+            "results schema version {version} is older than any this collide reads \
+             ({OLDEST_READABLE_VERSION} to {SCHEMA_VERSION}); re-run the study"
         ),
         Some(version) if version < SCHEMA_VERSION => {
             upgraded = upgrade(frame, version)?;
@@ -389,6 +460,8 @@ fn upgrade(frame: &DataFrame, version: u32) -> anyhow::Result<DataFrame> {
         if added_in > version && frame.column(name).is_err() {
             let column = match fill {
                 Fill::Str(value) => Column::new(name.into(), vec![value; frame.height()]),
+                Fill::F64(value) => Column::new(name.into(), vec![value; frame.height()]),
+                Fill::NullU64 => Column::new(name.into(), vec![None::<u64>; frame.height()]),
             };
             frame.with_column(column)?;
         }

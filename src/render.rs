@@ -7,7 +7,8 @@ use anyhow::{Context, anyhow};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::sim::{Boundary, Particles, Scene, Stepper};
+use crate::sim::engine::Engine;
+use crate::sim::{Boundary, Particles, Scene};
 use crate::spec::PreparedRun;
 
 /// Pixels along the longer side of the box.
@@ -106,9 +107,9 @@ pub fn png_after_run(prepared: &PreparedRun, path: &Path) -> anyhow::Result<()> 
     let scene = &prepared.scene;
     let fast = fast_speed(&scene.particles);
     let mut particles = scene.particles.clone();
-    let mut stepper = Stepper::for_scene(scene, prepared.params);
+    let mut engine = Engine::new(scene, prepared.method, prepared.params, prepared.event);
     for _ in 0..prepared.steps {
-        stepper.step(&mut particles);
+        engine.step(&mut particles);
     }
     let area = BitMapBackend::new(path, Frame::of(scene).size).into_drawing_area();
     draw_state(&area, scene, &particles, fast)?;
@@ -126,13 +127,13 @@ pub fn gif_of_run(prepared: &PreparedRun, path: &Path, frames: u32) -> anyhow::R
         .with_context(|| format!("cannot write {}", path.display()))?
         .into_drawing_area();
     let mut particles = scene.particles.clone();
-    let mut stepper = Stepper::for_scene(scene, prepared.params);
+    let mut engine = Engine::new(scene, prepared.method, prepared.params, prepared.event);
     let mut done = 0;
     for frame in 0..frames {
         // Frame k shows the state after round(k·steps/(frames − 1)) steps.
         let target = (u64::from(frame) * prepared.steps).div_ceil(u64::from(frames - 1).max(1));
         while done < target.min(prepared.steps) {
-            stepper.step(&mut particles);
+            engine.step(&mut particles);
             done += 1;
         }
         draw_state(&area, scene, &particles, fast)?;

@@ -15,7 +15,9 @@ use crate::sim::scene::{
     check_periodic_box,
 };
 use crate::sim::{Boundary, Broadphase, Disk, Domain, Particles, Physics, Scene};
-use crate::spec::{DEFAULT_DT_FRACTION, DtChoice, MethodSpec, RunSpec, SceneSource};
+use crate::spec::{
+    DEFAULT_DT_FRACTION, DtChoice, Method, MethodSpec, Observe, RunSpec, SceneSource,
+};
 
 /// Values given on the command line that replace the scene file's.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -26,6 +28,8 @@ pub struct Overrides {
     pub dt: Option<DtValue>,
     pub packing: Option<f64>,
     pub broadphase: Option<Broadphase>,
+    pub method: Option<Method>,
+    pub observe: Option<Observe>,
 }
 
 /// A time step as written: a number or the word "auto".
@@ -86,6 +90,7 @@ pub fn parse(path: &Path, text: &str, overrides: &Overrides) -> Result<RunSpec, 
     } else {
         SceneSource::Gas(validator.gas(&raw.scene, overrides)?)
     };
+    validator.method_fits_scene(&raw, &method, &scene)?;
     Ok(RunSpec { scene, method })
 }
 
@@ -155,6 +160,9 @@ struct RawMethod {
     dt_fraction: Option<Spanned<f64>>,
     steps: Option<Spanned<i64>>,
     broadphase: Option<Spanned<Broadphase>>,
+    method: Option<Spanned<Method>>,
+    tc: Option<Spanned<f64>>,
+    observe: Option<Spanned<Observe>>,
 }
 
 /// Where a value came from, for error messages.
@@ -273,11 +281,58 @@ impl Validator<'_> {
                 *b
             })
             .map_or(Broadphase::Grid, |sourced| sourced.value);
+        let method = self
+            .pick("--method", overrides.method, &raw.method, |m| *m)
+            .map_or(Method::Step, |sourced| sourced.value);
+        let observe = self
+            .pick("--observe", overrides.observe, &raw.observe, |o| *o)
+            .map_or(Observe::Timing, |sourced| sourced.value);
+        let tc = match self.in_file(&raw.tc) {
+            Some(Sourced { value, origin }) if !(value >= 0.0 && value.is_finite()) => {
+                return Err(self.invalid(
+                    origin,
+                    "method.tc",
+                    format!("is {value}, not a time ≥ 0"),
+                    "give the TC model time of the event method, e.g. tc = 1e-5 (0 turns the guard off)",
+                ));
+            }
+            sourced => sourced.map(|s| s.value),
+        };
         Ok(MethodSpec {
             dt,
             steps,
             broadphase,
+            method,
+            tc,
+            observe,
         })
+    }
+
+    /// What a method cannot do with a scene: the event method flies straight lines, so
+    /// it refuses a field rather than give a wrong answer.
+    fn method_fits_scene(
+        &self,
+        raw: &RawFile,
+        method: &MethodSpec,
+        scene: &SceneSource,
+    ) -> Result<(), SceneFileError> {
+        let physics = match scene {
+            SceneSource::Gas(gas) => gas.physics,
+            SceneSource::Explicit(scene) => scene.physics,
+        };
+        if method.method == Method::Event && physics.gravity.is_some() {
+            let origin = self
+                .in_file(&raw.scene.gravity)
+                .map_or(Origin::Default, |s| s.origin);
+            return Err(self.invalid(
+                origin,
+                "scene.gravity",
+                "is not modelled by the event method (its disks fly straight lines, not parabolas)"
+                    .to_owned(),
+                "remove gravity, or use method = \"step\"",
+            ));
+        }
+        Ok(())
     }
 
     fn physics(&self, raw: &RawScene) -> Result<Physics, SceneFileError> {

@@ -3,6 +3,10 @@
 //! `scene_file` turns TOML into a [`RunSpec`]; [`RunSpec::prepare`] builds the initial
 //! state and resolves `dt = "auto"`. Nothing here reads files or prints.
 
+use serde::Deserialize;
+
+pub use crate::sim::engine::Method;
+use crate::sim::event::EventParams;
 use crate::sim::scene::{GasSpec, PlacementError};
 use crate::sim::step::{StepParams, auto_dt};
 use crate::sim::{Broadphase, Scene};
@@ -29,12 +33,55 @@ pub enum DtChoice {
 /// Default of `dt_fraction`: the fastest disk moves at most a tenth of the smallest radius per step.
 pub const DEFAULT_DT_FRACTION: f64 = 0.1;
 
+/// Default TC model time of the event method, in units of r_min / v_rms (the time the
+/// rms disk takes to cross its radius): far below a mean free time at any packing.
+pub const DEFAULT_TC_FRACTION: f64 = 1e-4;
+
+/// What a run measures besides time.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Observe {
+    /// Only what costs nothing in the timed loop.
+    #[default]
+    Timing,
+    /// Also the exact missed-collision count of the step method (a swept pair test
+    /// every step, excluded from `wall_s`).
+    Accuracy,
+}
+
+impl Observe {
+    pub fn name(self) -> &'static str {
+        match self {
+            Observe::Timing => "timing",
+            Observe::Accuracy => "accuracy",
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MethodSpec {
     pub dt: DtChoice,
     /// Number of steps, at least 1.
     pub steps: u64,
     pub broadphase: Broadphase,
+    pub method: Method,
+    /// TC model time of the event method (≥ 0); `None`: [`DEFAULT_TC_FRACTION`] of r_min / v_rms.
+    pub tc: Option<f64>,
+    pub observe: Observe,
+}
+
+impl MethodSpec {
+    /// `steps` time steps of `dt` with the given broad phase: the default method, timing only.
+    pub fn stepped(dt: f64, steps: u64, broadphase: Broadphase) -> MethodSpec {
+        MethodSpec {
+            dt: DtChoice::Fixed(dt),
+            steps,
+            broadphase,
+            method: Method::Step,
+            tc: None,
+            observe: Observe::Timing,
+        }
+    }
 }
 
 /// A complete, valid description of one run.
@@ -53,6 +100,10 @@ pub struct PreparedRun {
     /// `Some(fraction)` when dt was chosen automatically.
     pub dt_auto_fraction: Option<f64>,
     pub seed: Option<u64>,
+    pub method: Method,
+    /// The event method's settings (its TC time resolved); unused by the step method.
+    pub event: EventParams,
+    pub observe: Observe,
 }
 
 impl RunSpec {
@@ -69,6 +120,23 @@ impl RunSpec {
                 Some(fraction),
             ),
         };
+        let tc = self.method.tc.unwrap_or_else(|| {
+            let n = scene.particles.len().max(1) as f64;
+            let mean_square = scene
+                .particles
+                .vx
+                .iter()
+                .zip(&scene.particles.vy)
+                .map(|(vx, vy)| vx * vx + vy * vy)
+                .sum::<f64>()
+                / n;
+            let speed = if mean_square > 0.0 {
+                mean_square.sqrt()
+            } else {
+                1.0
+            };
+            DEFAULT_TC_FRACTION * scene.particles.min_radius() / speed
+        });
         Ok(PreparedRun {
             scene,
             params: StepParams {
@@ -78,6 +146,9 @@ impl RunSpec {
             steps: self.method.steps,
             dt_auto_fraction,
             seed,
+            method: self.method.method,
+            event: EventParams { tc },
+            observe: self.method.observe,
         })
     }
 }

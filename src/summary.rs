@@ -58,6 +58,66 @@ pub struct RunSummary {
     pub max_overlap: f64,
     /// xxh3-64 of the bits of final x, y, vx, vy in id order: equal hashes, identical states.
     pub state_hash: String,
+    /// `"step"` (time steps of dt) or `"event"` (the exact event-driven reference).
+    #[serde(default = "default_method")]
+    pub method: String,
+    /// `"timing"`, or `"accuracy"` when the step method also counted missed collisions.
+    #[serde(default = "default_observe")]
+    pub observe: String,
+    /// Event method: pair and wall collisions per second of `wall_s` (cell crossings not
+    /// counted); null for the step method.
+    #[serde(default)]
+    pub events_per_s: Option<f64>,
+    /// Pair collisions per disk per unit time, counting both disks of each:
+    /// 2·pair_collisions / (n·steps·dt), comparable with Enskog's ω.
+    #[serde(default)]
+    pub collision_rate: Option<f64>,
+    /// Mean temperature T̄ = kinetic energy per disk (k_B = 1), averaged over the run
+    /// (over the sampled curve on the serial backend, else the mean of start and end).
+    #[serde(default)]
+    pub temperature: Option<f64>,
+    /// 2D pressure from the collision virial: P = (n·T̄ + Σ d·J / (2·steps·dt)) / A.
+    /// In a walled box it is the bulk estimate over the whole box area (wall forces are
+    /// not in the virial).
+    #[serde(default)]
+    pub pressure: Option<f64>,
+    /// Z = P·A / (n·T̄).
+    #[serde(default)]
+    pub compressibility_z: Option<f64>,
+    /// Pairs whose straight paths came within contact during a step without an impulse
+    /// (exact swept test): 0 for the event method; for the step method only with
+    /// `observe = "accuracy"` on the serial backend, else null.
+    #[serde(default)]
+    pub missed_collisions: Option<u64>,
+    /// missed_collisions / (missed_collisions + pair_collisions), null when either is.
+    #[serde(default)]
+    pub missed_collision_fraction: Option<f64>,
+    /// Mean overlap of the pairs that received an impulse, as a fraction of their contact
+    /// distance (rounding-sized for the event method); null without pair collisions.
+    #[serde(default)]
+    pub mean_overlap: Option<f64>,
+    /// (E_final − E_initial) / E_initial for elastic scenes (e = 1 for pairs and walls);
+    /// null otherwise (then energy loss is physics: see `temperature_curve`).
+    #[serde(default)]
+    pub energy_relative_error: Option<f64>,
+    /// Event method with e < 1: collisions the TC model made elastic; else null.
+    #[serde(default)]
+    pub collapse_guard_fired: Option<u64>,
+    /// Event method with e < 1: the TC model time used; else null.
+    #[serde(default)]
+    pub collapse_tc: Option<f64>,
+    /// Scenes with e < 1 (pairs or walls), serial backend: [t, T] at t = 0 and at up
+    /// to 40 evenly spaced steps; else null.
+    #[serde(default)]
+    pub temperature_curve: Option<Vec<[f64; 2]>>,
+}
+
+fn default_method() -> String {
+    "step".to_owned()
+}
+
+fn default_observe() -> String {
+    "timing".to_owned()
 }
 
 impl RunSummary {
@@ -127,6 +187,33 @@ impl fmt::Display for RunSummary {
             self.wall_collisions,
             100.0 * self.max_overlap
         )?;
+        let show =
+            |value: Option<f64>| value.map_or_else(|| "n/a".to_owned(), |v| format!("{v:.4e}"));
+        let count = |value: Option<u64>| value.map_or_else(|| "n/a".to_owned(), |v| v.to_string());
+        writeln!(
+            f,
+            "method     {} ({}), events/s {}",
+            self.method,
+            self.observe,
+            show(self.events_per_s)
+        )?;
+        writeln!(
+            f,
+            "accuracy   collision rate {}, pressure {}, Z {}, missed {} (fraction {}), mean overlap {}",
+            show(self.collision_rate),
+            show(self.pressure),
+            show(self.compressibility_z),
+            count(self.missed_collisions),
+            show(self.missed_collision_fraction),
+            show(self.mean_overlap)
+        )?;
+        if let Some(guard) = self.collapse_guard_fired {
+            writeln!(
+                f,
+                "collapse   TC guard fired {guard} times (tc = {})",
+                show(self.collapse_tc)
+            )?;
+        }
         write!(f, "state hash {}", self.state_hash)
     }
 }

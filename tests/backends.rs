@@ -5,7 +5,7 @@ use std::num::NonZeroUsize;
 use collide::backend::{serial, threads};
 use collide::sim::scene::{GasSpec, MassRule, RadiusDistribution};
 use collide::sim::{Boundary, Broadphase, Physics};
-use collide::spec::{DtChoice, MethodSpec, RunSpec, SceneSource};
+use collide::spec::{MethodSpec, RunSpec, SceneSource};
 
 /// Dilute and dense, walls and periodic, elastic and inelastic: the cases the issue names.
 fn scenes() -> Vec<(String, RunSpec)> {
@@ -32,11 +32,7 @@ fn scenes() -> Vec<(String, RunSpec)> {
 fn run_spec(gas: GasSpec, broadphase: Broadphase) -> RunSpec {
     RunSpec {
         scene: SceneSource::Gas(gas),
-        method: MethodSpec {
-            dt: DtChoice::Fixed(0.05),
-            steps: 300,
-            broadphase,
-        },
+        method: MethodSpec::stepped(0.05, 300, broadphase),
     }
 }
 

@@ -56,6 +56,20 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         wall_collisions: 182,
         max_overlap: 0.138,
         state_hash: "51a3e11e31576e81".into(),
+        method: "step".into(),
+        observe: "timing".into(),
+        events_per_s: None,
+        collision_rate: Some(0.0867),
+        temperature: Some(0.5),
+        pressure: Some(0.0041),
+        compressibility_z: Some(1.05),
+        missed_collisions: None,
+        missed_collision_fraction: None,
+        mean_overlap: Some(0.02),
+        energy_relative_error: Some(0.0),
+        collapse_guard_fired: None,
+        collapse_tc: None,
+        temperature_curve: None,
     }
 }
 
@@ -270,31 +284,28 @@ fn parquet_with(
 }
 
 #[test]
-fn a_version_1_file_without_the_scaling_column_is_reported_as_strong_scaling() {
+fn a_file_written_by_schema_version_1_is_reported_as_timed_strong_scaling() {
+    // A real file of the seed-report study, written by the collide of schema version 1
+    // (no scaling, method or accuracy columns).
     let dir = tempfile::tempdir().unwrap();
-    let path = parquet_with(dir.path(), &records(), |frame| {
-        frame.drop_in_place("scaling").unwrap();
-        let version =
-            polars::prelude::Column::new("schema_version".into(), vec![1u32; frame.height()]);
-        frame.with_column(version).unwrap();
-    });
-    let out_dir = dir.path().join("report");
     let out = crate::cli::collide(&[
         "report",
-        path.to_str().unwrap(),
+        "tests/fixtures/schema-1-seed-report.parquet",
         "--out",
-        out_dir.to_str().unwrap(),
+        dir.path().to_str().unwrap(),
     ]);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let text = std::fs::read_to_string(out_dir.join("report.md")).unwrap();
+    let text = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(
-        text.contains("| rayon | 2 | 1.82 | 91% | 0.098 |"),
+        text.contains("| workers | seconds_serial | seconds_rayon | seconds_mpi |"),
         "{text}"
     );
+    assert!(text.contains("Every run ended in the same state"), "{text}");
+    assert!(!text.contains("weak scaling"), "{text}");
 }
 
 #[test]

@@ -1,5 +1,6 @@
 //! All integration tests, built into one test binary.
 
+mod accuracy;
 mod backends;
 mod cli;
 #[cfg(feature = "mpi")]

@@ -17,7 +17,9 @@ use std::ops::Range;
 use std::time::Instant;
 
 use crate::backend::comm::Communicator;
-use crate::backend::{BackendError, Measured, RunOutcome, StageSeconds, Workers, summarize, timed};
+use crate::backend::{
+    Accuracy, BackendError, Measured, RunOutcome, StageSeconds, Workers, summarize, timed,
+};
 use crate::sim::collision::{PairSide, collide_pair};
 use crate::sim::grid::{Contact, Entry, StripGrid, StripLayout, receive_band, refresh_band};
 use crate::sim::observe::observe;
@@ -68,6 +70,8 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         s.broad_phase,
         s.collisions,
         s.communication,
+        c.overlap_sum,
+        c.virial,
     ];
     let all_figures = comm.all_gather(&figures);
     if comm.rank() != 0 {
@@ -85,6 +89,8 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
             pair_collisions: f[0] as u64,
             wall_collisions: f[1] as u64,
             max_overlap: f[2],
+            overlap_sum: f[8],
+            virial: f[9],
         });
         // The slowest rank sets the pace: report its time, and each stage's longest.
         slowest_wall_s = slowest_wall_s.max(f[3]);
@@ -99,6 +105,7 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         stages,
         counters,
         initial: observe(&scene.particles),
+        accuracy: Accuracy::default(),
     };
     let workers = Workers {
         backend: "mpi",
@@ -464,7 +471,7 @@ mod tests {
     use crate::backend::serial;
     use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution};
     use crate::sim::{Broadphase, Physics};
-    use crate::spec::{DtChoice, MethodSpec, SceneSource};
+    use crate::spec::{MethodSpec, SceneSource};
 
     fn spec(boundary: Boundary, restitution: f64, packing: f64) -> RunSpec {
         RunSpec {
@@ -476,11 +483,7 @@ mod tests {
                 seed: 17,
                 ..GasSpec::unit(2000, packing)
             }),
-            method: MethodSpec {
-                dt: DtChoice::Fixed(0.05),
-                steps: 300,
-                broadphase: Broadphase::Grid,
-            },
+            method: MethodSpec::stepped(0.05, 300, Broadphase::Grid),
         }
     }
 

@@ -18,7 +18,7 @@ use std::time::Instant;
 use crate::sim::observe::{Observables, observe, state_hash};
 use crate::sim::scene::PlacementError;
 use crate::sim::{Particles, StepCounters};
-use crate::spec::PreparedRun;
+use crate::spec::{Method, PreparedRun};
 use crate::summary::RunSummary;
 
 /// Which backend runs the steps, with its worker count.
@@ -119,13 +119,37 @@ fn count_cpu_list(list: &str) -> Option<usize> {
 }
 
 /// What the stepping loop measured, for [`summarize`].
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct Measured {
     pub setup_s: f64,
     pub wall_s: f64,
     pub stages: StageSeconds,
     pub counters: StepCounters,
     pub initial: Observables,
+    pub accuracy: Accuracy,
+}
+
+/// What a backend observed beyond the counters; `None` where it does not observe it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Accuracy {
+    /// Missed collisions (exact swept test; 0 for the event method).
+    pub missed_collisions: Option<u64>,
+    /// Event method: collisions the TC model made elastic, and its time.
+    pub collapse_guard: Option<(u64, f64)>,
+    /// [t, kinetic energy per disk] at t = 0 and at up to [`CURVE_SAMPLES`] steps.
+    pub temperature_curve: Option<Vec<[f64; 2]>>,
+}
+
+/// Samples of the temperature curve after t = 0.
+pub const CURVE_SAMPLES: u64 = 40;
+
+/// The steps after which the temperature curve is sampled: up to [`CURVE_SAMPLES`],
+/// evenly spread, the last one the final step.
+pub fn is_curve_sample(step: u64, steps: u64) -> bool {
+    let samples = CURVE_SAMPLES.min(steps);
+    // Step k (1-based) is a sample when ⌊k·samples/steps⌋ moves on: `samples` of them,
+    // the last at k = steps.
+    step * samples / steps != (step - 1) * samples / steps
 }
 
 /// The summary of a finished run; `last` is the whole final state in any storage order.
@@ -140,6 +164,32 @@ pub fn summarize(
     let wall_s = measured.wall_s;
     let final_observables = observe(last);
     let cores = machine_cores();
+    let counters = &measured.counters;
+    let accuracy = &measured.accuracy;
+    let scene = &prepared.scene;
+    let physics = &scene.physics;
+    let duration = steps as f64 * prepared.params.dt;
+    let n_f = n.max(1) as f64;
+    // T̄: the time average of the sampled curve (trapezoids), else the mean of the ends.
+    let temperature = match &accuracy.temperature_curve {
+        Some(curve) if curve.len() > 1 => {
+            let area: f64 = curve
+                .windows(2)
+                .map(|w| 0.5 * (w[0][1] + w[1][1]) * (w[1][0] - w[0][0]))
+                .sum();
+            area / (curve[curve.len() - 1][0] - curve[0][0])
+        }
+        _ => 0.5 * (measured.initial.kinetic_energy + final_observables.kinetic_energy) / n_f,
+    };
+    let area = scene.domain.area();
+    let pressure = (n_f * temperature + counters.virial / (2.0 * duration)) / area;
+    let elastic = physics.restitution == 1.0 && physics.wall_restitution == 1.0;
+    let is_event = prepared.method == Method::Event;
+    let missed = if is_event {
+        Some(0)
+    } else {
+        accuracy.missed_collisions
+    };
     RunSummary {
         n,
         steps,
@@ -170,5 +220,32 @@ pub fn summarize(
         wall_collisions: measured.counters.wall_collisions,
         max_overlap: measured.counters.max_overlap,
         state_hash: state_hash(last),
+        method: prepared.method.name().to_owned(),
+        observe: prepared.observe.name().to_owned(),
+        events_per_s: is_event
+            .then(|| (counters.pair_collisions + counters.wall_collisions) as f64 / wall_s),
+        collision_rate: Some(2.0 * counters.pair_collisions as f64 / (n_f * duration)),
+        temperature: Some(temperature),
+        pressure: Some(pressure),
+        compressibility_z: (temperature > 0.0).then(|| pressure * area / (n_f * temperature)),
+        missed_collisions: missed,
+        missed_collision_fraction: missed
+            .filter(|m| m + counters.pair_collisions > 0)
+            .map(|m| m as f64 / (m + counters.pair_collisions) as f64),
+        mean_overlap: (counters.pair_collisions > 0)
+            .then(|| counters.overlap_sum / counters.pair_collisions as f64),
+        energy_relative_error: (elastic && measured.initial.kinetic_energy > 0.0).then(|| {
+            (final_observables.kinetic_energy - measured.initial.kinetic_energy)
+                / measured.initial.kinetic_energy
+        }),
+        collapse_guard_fired: accuracy
+            .collapse_guard
+            .filter(|_| physics.restitution < 1.0)
+            .map(|(fired, _)| fired),
+        collapse_tc: accuracy
+            .collapse_guard
+            .filter(|_| physics.restitution < 1.0)
+            .map(|(_, tc)| tc),
+        temperature_curve: accuracy.temperature_curve.clone().filter(|_| !elastic),
     }
 }

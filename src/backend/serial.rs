@@ -1,40 +1,96 @@
-//! The serial backend: the reference implementation every parallel backend must match.
+//! The serial backend: the reference implementation every parallel backend must match,
+//! and the only one that runs the event-driven method and the accuracy observers.
 
 use std::time::Instant;
 
-use crate::backend::{BackendError, Measured, RunOutcome, StageSeconds, Workers, summarize, timed};
+use crate::backend::{
+    Accuracy, BackendError, Measured, RunOutcome, StageSeconds, Workers, is_curve_sample,
+    summarize, timed,
+};
+use crate::sim::Particles;
 use crate::sim::Stepper;
-use crate::sim::observe::observe;
-use crate::spec::RunSpec;
+use crate::sim::event::EventSim;
+use crate::sim::observe::{MissedCollisions, observe};
+use crate::spec::{Method, Observe, PreparedRun, RunSpec};
 
-/// Builds the scene, steps it on one thread, and measures the run stage by stage.
+/// Builds the scene, runs it on one thread with its method, and measures the run
+/// stage by stage. Observing (the temperature curve, missed collisions) is timed apart
+/// and left out of `wall_s`.
 pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
     let setup_start = Instant::now();
     let prepared = spec.prepare()?;
     let mut particles = prepared.scene.particles.clone();
-    let mut stepper = Stepper::for_scene(&prepared.scene, prepared.params);
-    let setup_s = setup_start.elapsed().as_secs_f64();
     let initial = observe(&particles);
-
+    let mut curve = Curve::new(&particles);
     let mut stages = StageSeconds::default();
-    let loop_start = Instant::now();
-    for _ in 0..prepared.steps {
-        timed(&mut stages.integration, || stepper.advance(&mut particles));
-        timed(&mut stages.broad_phase, || {
-            stepper.find_contacts(&mut particles)
-        });
-        timed(&mut stages.collisions, || {
-            stepper.resolve_contacts(&mut particles)
-        });
-    }
-    let wall_s = loop_start.elapsed().as_secs_f64();
-
+    let (setup_s, loop_s, counters, mut accuracy) = match prepared.method {
+        Method::Step => {
+            let mut stepper = Stepper::for_scene(&prepared.scene, prepared.params);
+            let setup_s = setup_start.elapsed().as_secs_f64();
+            let mut missed =
+                (prepared.observe == Observe::Accuracy).then(MissedCollisions::default);
+            let (domain, dt) = (prepared.scene.domain, prepared.params.dt);
+            let loop_start = Instant::now();
+            for step in 1..=prepared.steps {
+                if let Some(missed) = missed.as_mut() {
+                    timed(&mut curve.seconds, || {
+                        missed.before_step(&particles, &domain, dt)
+                    });
+                }
+                timed(&mut stages.integration, || stepper.advance(&mut particles));
+                timed(&mut stages.broad_phase, || {
+                    stepper.find_contacts(&mut particles)
+                });
+                match missed.as_mut() {
+                    None => timed(&mut stages.collisions, || {
+                        stepper.resolve_contacts(&mut particles)
+                    }),
+                    Some(missed) => {
+                        timed(&mut stages.collisions, || {
+                            stepper
+                                .resolve_contacts_noting(&mut particles, |key| missed.resolved(key))
+                        });
+                        timed(&mut curve.seconds, || missed.after_step());
+                    }
+                }
+                curve.sample(&prepared, step, &particles);
+            }
+            let accuracy = Accuracy {
+                missed_collisions: missed.map(|m| m.missed),
+                ..Accuracy::default()
+            };
+            let loop_s = loop_start.elapsed().as_secs_f64();
+            (setup_s, loop_s, stepper.counters(), accuracy)
+        }
+        Method::Event => {
+            let scene = &prepared.scene;
+            let mut sim = EventSim::new(scene.domain, scene.physics, prepared.event, &particles);
+            let setup_s = setup_start.elapsed().as_secs_f64();
+            let loop_start = Instant::now();
+            for step in 1..=prepared.steps {
+                // The time of interval k is k·dt, not a running sum.
+                timed(&mut stages.collisions, || {
+                    sim.advance_to(&mut particles, step as f64 * prepared.params.dt)
+                });
+                curve.sample(&prepared, step, &particles);
+            }
+            let accuracy = Accuracy {
+                collapse_guard: Some((sim.collapse_guard_fired(), prepared.event.tc)),
+                ..Accuracy::default()
+            };
+            let loop_s = loop_start.elapsed().as_secs_f64();
+            (setup_s, loop_s, sim.counters(), accuracy)
+        }
+    };
+    let wall_s = loop_s - curve.seconds;
+    accuracy.temperature_curve = Some(curve.points);
     let measured = Measured {
         setup_s,
         wall_s,
         stages,
-        counters: stepper.counters(),
+        counters,
         initial,
+        accuracy,
     };
     let workers = Workers {
         backend: "serial",
@@ -46,4 +102,34 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
         summary,
         final_state: particles,
     })
+}
+
+/// The temperature curve [t, kinetic energy per disk], and the seconds spent observing.
+struct Curve {
+    points: Vec<[f64; 2]>,
+    seconds: f64,
+}
+
+impl Curve {
+    fn new(particles: &Particles) -> Curve {
+        Curve {
+            points: vec![[0.0, temperature(particles)]],
+            seconds: 0.0,
+        }
+    }
+
+    /// Records a point after `step` if it is one of the sampled steps.
+    fn sample(&mut self, prepared: &PreparedRun, step: u64, particles: &Particles) {
+        if is_curve_sample(step, prepared.steps) {
+            let points = &mut self.points;
+            timed(&mut self.seconds, || {
+                points.push([step as f64 * prepared.params.dt, temperature(particles)]);
+            });
+        }
+    }
+}
+
+/// Kinetic energy per disk (k_B = 1 in 2D).
+fn temperature(particles: &Particles) -> f64 {
+    observe(particles).kinetic_energy / particles.len().max(1) as f64
 }

@@ -15,7 +15,9 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::backend::{BackendError, Measured, RunOutcome, StageSeconds, Workers, summarize, timed};
+use crate::backend::{
+    Accuracy, BackendError, Measured, RunOutcome, StageSeconds, Workers, summarize, timed,
+};
 use crate::sim::collision::{PairSide, collide_pair};
 use crate::sim::grid::{
     Contact, Entry, StripGrid, find_contacts_all_pairs_from, number_slots, receive_band,
@@ -70,6 +72,7 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
         stages: stepper.stages,
         counters: stepper.counters,
         initial,
+        accuracy: Accuracy::default(),
     };
     let workers = Workers {
         backend: "rayon",

@@ -26,6 +26,9 @@ pub struct ContactOutcome {
     pub overlap_fraction: f64,
     /// True when the pair was approaching and an impulse was applied.
     pub collided: bool,
+    /// The pair's collision virial `d·J`: centre distance times the normal impulse
+    /// (0 when no impulse was applied). Summed over time it gives the pressure.
+    pub virial: f64,
 }
 
 /// What one disk of a pair brings to a collision: its mass and velocity.
@@ -34,6 +37,36 @@ pub struct PairSide {
     pub mass: f64,
     pub vx: f64,
     pub vy: f64,
+}
+
+/// The impulse law along the unit normal `(nx, ny)` pointing from a to b: returns the
+/// new velocities `[vx, vy]` of a and b and the normal impulse J ≥ 0 given to b (a gets
+/// −J), for a pair that approaches. The time-stepped contact ([`collide_pair`]) and the
+/// event-driven collision (`sim::event`) both apply it: one law, one place.
+#[inline(always)]
+pub fn exchange_along(
+    restitution: f64,
+    nx: f64,
+    ny: f64,
+    a: PairSide,
+    b: PairSide,
+) -> ([[f64; 2]; 2], f64) {
+    let ua = a.vx * nx + a.vy * ny;
+    let ub = b.vx * nx + b.vy * ny;
+    let (ua_after, ub_after) = normal_velocities_after(a.mass, b.mass, restitution, ua, ub);
+    // v' = v_t + u'·n with v_t = v − u·n: along an axis the tangential part is exactly zero,
+    // so a head-on exchange of equal masses swaps the bits exactly.
+    let velocities = [
+        [
+            (a.vx - ua * nx) + ua_after * nx,
+            (a.vy - ua * ny) + ua_after * ny,
+        ],
+        [
+            (b.vx - ub * nx) + ub_after * nx,
+            (b.vy - ub * ny) + ub_after * ny,
+        ],
+    ];
+    (velocities, a.mass * (ua - ua_after))
 }
 
 /// The impulse law applied to one pair, on values only, so every backend (serial,
@@ -58,6 +91,7 @@ pub fn collide_pair(
         let outcome = ContactOutcome {
             overlap_fraction: 0.0,
             collided: false,
+            virial: 0.0,
         };
         return (outcome, None);
     }
@@ -68,28 +102,16 @@ pub fn collide_pair(
         let outcome = ContactOutcome {
             overlap_fraction,
             collided: false,
+            virial: 0.0,
         };
         return (outcome, None);
     }
     let (nx, ny) = (dx / distance, dy / distance);
-    let ua = a.vx * nx + a.vy * ny;
-    let ub = b.vx * nx + b.vy * ny;
-    let (ua_after, ub_after) = normal_velocities_after(a.mass, b.mass, restitution, ua, ub);
-    // v' = v_t + u'·n with v_t = v − u·n: along an axis the tangential part is exactly zero,
-    // so a head-on exchange of equal masses swaps the bits exactly.
-    let velocities = [
-        [
-            (a.vx - ua * nx) + ua_after * nx,
-            (a.vy - ua * ny) + ua_after * ny,
-        ],
-        [
-            (b.vx - ub * nx) + ub_after * nx,
-            (b.vy - ub * ny) + ub_after * ny,
-        ],
-    ];
+    let (velocities, impulse) = exchange_along(restitution, nx, ny, a, b);
     let outcome = ContactOutcome {
         overlap_fraction,
         collided: true,
+        virial: distance * impulse,
     };
     (outcome, Some(velocities))
 }

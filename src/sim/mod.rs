@@ -2,7 +2,10 @@
 //!
 //! No I/O, no printing, no threads: backends wrap it, and a step cannot fail.
 
+pub mod cells;
 pub mod collision;
+pub mod engine;
+pub mod event;
 pub mod grid;
 pub mod observe;
 pub mod particles;

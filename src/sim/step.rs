@@ -56,6 +56,10 @@ pub struct StepCounters {
     pub wall_collisions: u64,
     /// Largest overlap seen, as a fraction of the pair's contact distance.
     pub max_overlap: f64,
+    /// Σ overlap fraction over the pairs that received an impulse (for the mean overlap).
+    pub overlap_sum: f64,
+    /// Σ d·J over the impulses applied: the collision virial (for the pressure).
+    pub virial: f64,
 }
 
 /// Advances a set of disks in time. Holds scratch memory only; the caller owns the disks.
@@ -144,13 +148,30 @@ impl Stepper {
 
     /// Applies the impulse law to each found pair, in canonical order.
     pub fn resolve_contacts(&mut self, particles: &mut Particles) {
+        self.resolve_contacts_noting(particles, |_| {});
+    }
+
+    /// [`Stepper::resolve_contacts`], calling `collided` with the key
+    /// ([`Contact::key`]) of every pair that received an impulse: the accuracy observer
+    /// (`sim::observe::MissedCollisions`) compares them with the pairs that met.
+    pub fn resolve_contacts_noting(
+        &mut self,
+        particles: &mut Particles,
+        mut collided: impl FnMut(u64),
+    ) {
         let e = self.physics.restitution;
-        resolve_in_order(
+        let counters = &mut self.counters;
+        resolve_in_order_with(
             particles,
             &self.domain,
             e,
             &self.contacts,
-            &mut self.counters,
+            |contact, outcome| {
+                counters.record(outcome);
+                if outcome.collided {
+                    collided(contact.key);
+                }
+            },
         );
     }
 }
@@ -163,6 +184,21 @@ pub fn resolve_in_order(
     contacts: &[Contact],
     counters: &mut StepCounters,
 ) {
+    resolve_in_order_with(particles, domain, restitution, contacts, |_, outcome| {
+        counters.record(outcome)
+    });
+}
+
+/// Resolves `contacts` one after another, in the order given, handing each outcome to
+/// `on_outcome`.
+#[inline(always)]
+fn resolve_in_order_with(
+    particles: &mut Particles,
+    domain: &Domain,
+    restitution: f64,
+    contacts: &[Contact],
+    mut on_outcome: impl FnMut(&Contact, ContactOutcome),
+) {
     for contact in contacts {
         let outcome = resolve_contact(
             particles,
@@ -171,7 +207,7 @@ pub fn resolve_in_order(
             contact.a as usize,
             contact.b as usize,
         );
-        counters.record(outcome);
+        on_outcome(contact, outcome);
     }
 }
 
@@ -181,6 +217,10 @@ impl StepCounters {
     pub fn record(&mut self, outcome: ContactOutcome) {
         self.pair_collisions += u64::from(outcome.collided);
         self.max_overlap = self.max_overlap.max(outcome.overlap_fraction);
+        if outcome.collided {
+            self.overlap_sum += outcome.overlap_fraction;
+        }
+        self.virial += outcome.virial;
     }
 
     /// Adds the counts of another worker's steps.
@@ -188,6 +228,8 @@ impl StepCounters {
         self.pair_collisions += other.pair_collisions;
         self.wall_collisions += other.wall_collisions;
         self.max_overlap = self.max_overlap.max(other.max_overlap);
+        self.overlap_sum += other.overlap_sum;
+        self.virial += other.virial;
     }
 }
 

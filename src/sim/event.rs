@@ -1,0 +1,720 @@
+//! The event-driven reference: disks fly in straight lines between collisions, and the
+//! exact time of every pair collision, wall bounce and cell crossing is computed and
+//! processed in time order, so no collision is missed (Rapaport's method; Lubachevsky's
+//! delayed states). Pure: no I/O, no threads, and it cannot fail mid-run.
+//!
+//! - **Delayed states.** Each disk stores its position at its own last event time; only
+//!   the disks of an event are brought to the event's time. [`EventSim::advance_to`]
+//!   brings every disk to the requested time and writes the state out.
+//! - **Cells** at least one contact diameter across (wider in sparse boxes: about one
+//!   disk per cell); a disk's cell changes exactly at its crossing events, so a pair can
+//!   only touch while in neighbouring cells. Pair predictions look at the 3 × 3
+//!   neighbourhood, with each neighbour's periodic image shift.
+//! - **Queue.** One pending event per disk, its earliest, kept in a tournament tree
+//!   (O(log N) update, O(1) minimum). A pair event records the partner's collision counter
+//!   at prediction time; if the partner's velocity changed since, the event is stale and
+//!   the disk is predicted afresh when it comes up (lazy invalidation). A crossing does
+//!   not change a trajectory, so it keeps the best pair event found so far and only looks
+//!   at the cells that entered the neighbourhood.
+//! - **Memory order.** Every few events per disk the disks are re-stored cell by cell, so
+//!   a neighbourhood's disks lie close together in memory; the caller's storage order is
+//!   kept in `origin` and never changes.
+//! - **Contact physics** is the time-stepped method's impulse law
+//!   ([`exchange_along`]) along the line of centres at contact.
+//! - **Inelastic collapse** (e < 1): the TC model of Luding and McNamara — a collision is
+//!   elastic when either disk collided less than `tc` ago; [`EventSim::collapse_guard_fired`]
+//!   counts how often.
+//!
+//! Gravity (parabolic flights) is not modelled: input validation refuses it with this
+//! method. Disks must start without overlaps (scene construction guarantees it).
+
+use super::cells::{CellList, NONE, Neighbour};
+use super::collision::{PairSide, exchange_along};
+use super::particles::Particles;
+use super::scene::{Boundary, Domain, Physics};
+use super::step::StepCounters;
+
+/// Cells hold about this many disks in sparse boxes (fewer crossings, more candidates;
+/// 1 did best of 0.4–3 in instruction counts at packings 0.05 and 0.3).
+const DISKS_PER_CELL: f64 = 1.0;
+
+/// Events between re-storings of the disks in cell order, per disk.
+const EVENTS_PER_DISK_BETWEEN_REORDERS: u64 = 8;
+
+/// Settings of the event-driven method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EventParams {
+    /// TC model time: a collision within `tc` of either disk's previous one is elastic.
+    /// 0 turns the guard off; irrelevant when e = 1.
+    pub tc: f64,
+}
+
+/// What a disk's next event is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Kind {
+    /// Nothing ahead (a disk at rest in a box of disks at rest).
+    Nothing,
+    /// Collision with `partner`, valid while the partner's counter still equals `count`.
+    Pair { partner: u32, count: u32 },
+    /// Entering the neighbouring cell along x (`axis` 0) or y (1), forward or backward.
+    Cross { axis: u8, forward: bool },
+    /// Bouncing off the wall along `axis`.
+    Wall { axis: u8 },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Scheduled {
+    time: f64,
+    kind: Kind,
+}
+
+const NOTHING: Scheduled = Scheduled {
+    time: f64::INFINITY,
+    kind: Kind::Nothing,
+};
+
+impl Scheduled {
+    #[inline(always)]
+    fn earlier(self, other: Scheduled) -> Scheduled {
+        if other.time < self.time { other } else { self }
+    }
+}
+
+/// One disk's flight: its position at its local time `t` and its velocity. 64 bytes,
+/// what a pair prediction reads of a neighbour, in one cache line.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(align(64))]
+struct Flight {
+    x: f64,
+    y: f64,
+    vx: f64,
+    vy: f64,
+    t: f64,
+    radius: f64,
+    mass: f64,
+    /// Time of the disk's last pair collision (TC model).
+    last_collision: f64,
+}
+
+impl Flight {
+    #[inline(always)]
+    fn position_at(&self, time: f64) -> (f64, f64) {
+        let dt = time - self.t;
+        (self.x + self.vx * dt, self.y + self.vy * dt)
+    }
+}
+
+/// The earliest pending event of every disk, as a tournament tree: `nodes[1]` holds the
+/// earliest of all, `nodes[k]` the earlier of `nodes[2k]` and `nodes[2k + 1]`, and the
+/// leaves `nodes[size + i]` the events of disk i. Ties go to the lower disk index, so
+/// the processing order is deterministic.
+#[derive(Clone, Debug)]
+struct EventTree {
+    size: usize,
+    nodes: Vec<(f64, u32)>,
+}
+
+impl EventTree {
+    fn new(n_particles: usize) -> EventTree {
+        let size = n_particles.next_power_of_two().max(1);
+        EventTree {
+            size,
+            nodes: vec![(f64::INFINITY, NONE); 2 * size],
+        }
+    }
+
+    #[inline(always)]
+    fn earliest(&self) -> (f64, u32) {
+        self.nodes[1]
+    }
+
+    #[inline]
+    fn set(&mut self, disk: u32, time: f64) {
+        let mut k = self.size + disk as usize;
+        let mut value = (time, disk);
+        self.nodes[k] = value;
+        while k > 1 {
+            // The sibling shares the cache line; ties go to the left child.
+            let sibling = self.nodes[k ^ 1];
+            let sibling_wins = if k & 1 == 1 {
+                sibling.0 <= value.0
+            } else {
+                sibling.0 < value.0
+            };
+            if sibling_wins {
+                value = sibling;
+            }
+            k /= 2;
+            if self.nodes[k] == value {
+                // Unchanged here, so unchanged above.
+                break;
+            }
+            self.nodes[k] = value;
+        }
+    }
+}
+
+/// The event-driven simulation of one scene. It owns the flights; the caller's
+/// [`Particles`] receive the state, in their own storage order, at every
+/// [`EventSim::advance_to`].
+#[derive(Clone, Debug)]
+pub struct EventSim {
+    domain: Domain,
+    physics: Physics,
+    params: EventParams,
+    /// The time of the last processed event (or of the last `advance_to`).
+    time: f64,
+    cells: CellList,
+    flights: Vec<Flight>,
+    /// Per disk: its storage index in the caller's [`Particles`].
+    origin: Vec<u32>,
+    /// Events processed since the disks were last re-stored in cell order.
+    events_since_reorder: u64,
+    /// Per disk: column and row of its cell.
+    home: Vec<[u32; 2]>,
+    /// Per disk: how many times its velocity changed (invalidates partners' predictions).
+    count: Vec<u32>,
+    /// Per disk: its pending event (the tree's leaf).
+    next: Vec<Scheduled>,
+    /// Per disk: the earliest pair event found since its velocity last changed.
+    best_pair: Vec<Scheduled>,
+    tree: EventTree,
+    counters: StepCounters,
+    cell_crossings: u64,
+    collapse_guard_fired: u64,
+}
+
+impl EventSim {
+    /// Starts at time 0 from `particles` (no overlaps; positions inside the box).
+    pub fn new(
+        domain: Domain,
+        physics: Physics,
+        params: EventParams,
+        particles: &Particles,
+    ) -> EventSim {
+        let n = particles.len();
+        let density = n as f64 / domain.area();
+        let min_side = (2.0 * particles.max_radius()).max((DISKS_PER_CELL / density).sqrt());
+        // A periodic box needs 3 cells each way (3 contact diameters fit: scene checks).
+        let min_side = match domain.boundary {
+            Boundary::Periodic => min_side
+                .min(domain.width / 3.0)
+                .min(domain.height / 3.0)
+                .max(2.0 * particles.max_radius()),
+            Boundary::Walls => min_side,
+        };
+        let mut cells = CellList::new(&domain, min_side, n);
+        let mut home = Vec::with_capacity(n);
+        let flights: Vec<Flight> = (0..n)
+            .map(|idx| {
+                let (col, row) = cells.cell_of(particles.x[idx], particles.y[idx]);
+                cells.insert(idx as u32, cells.index(col, row));
+                home.push([col as u32, row as u32]);
+                Flight {
+                    x: particles.x[idx],
+                    y: particles.y[idx],
+                    vx: particles.vx[idx],
+                    vy: particles.vy[idx],
+                    t: 0.0,
+                    radius: particles.radius[idx],
+                    mass: particles.mass[idx],
+                    last_collision: f64::NEG_INFINITY,
+                }
+            })
+            .collect();
+        let mut sim = EventSim {
+            domain,
+            physics,
+            params,
+            time: 0.0,
+            cells,
+            flights,
+            origin: (0..n as u32).collect(),
+            events_since_reorder: 0,
+            home,
+            count: vec![0; n],
+            next: vec![NOTHING; n],
+            best_pair: vec![NOTHING; n],
+            tree: EventTree::new(n),
+            counters: StepCounters::default(),
+            cell_crossings: 0,
+            collapse_guard_fired: 0,
+        };
+        sim.reorder();
+        for disk in 0..n as u32 {
+            sim.predict(disk);
+        }
+        sim
+    }
+
+    /// Re-stores the disks cell by cell (row by row), remapping every index that names a
+    /// disk. Physics is untouched: only where each disk's data lives changes.
+    fn reorder(&mut self) {
+        let n = self.flights.len();
+        let mut order = Vec::with_capacity(n); // new slot → old slot
+        for cell in 0..self.cells.len() {
+            let mut disk = self.cells.first_in_cell(cell);
+            while disk != NONE {
+                order.push(disk);
+                disk = self.cells.next_in_cell(disk);
+            }
+        }
+        let mut new_slot = vec![0u32; n];
+        for (new, &old) in order.iter().enumerate() {
+            new_slot[old as usize] = new as u32;
+        }
+        let remap = |event: Scheduled| match event.kind {
+            Kind::Pair { partner, count } => Scheduled {
+                time: event.time,
+                kind: Kind::Pair {
+                    partner: new_slot[partner as usize],
+                    count,
+                },
+            },
+            _ => event,
+        };
+        permute(&mut self.flights, &order, |f| f);
+        permute(&mut self.origin, &order, |o| o);
+        permute(&mut self.home, &order, |h| h);
+        permute(&mut self.count, &order, |c| c);
+        permute(&mut self.next, &order, remap);
+        permute(&mut self.best_pair, &order, remap);
+        self.cells.clear();
+        // Inserting backwards leaves each cell's list in ascending slot order.
+        for disk in (0..n).rev() {
+            let [col, row] = self.home[disk];
+            let cell = self.cells.index(col as usize, row as usize);
+            self.cells.insert(disk as u32, cell);
+        }
+        for disk in 0..n {
+            self.tree.set(disk as u32, self.next[disk].time);
+        }
+        self.events_since_reorder = 0;
+    }
+
+    /// Time reached so far.
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+
+    /// Pair and wall collisions, overlaps at contact (rounding only) and the virial.
+    pub fn counters(&self) -> StepCounters {
+        self.counters
+    }
+
+    /// Cell crossings processed (bookkeeping events, not physics).
+    pub fn cell_crossings(&self) -> u64 {
+        self.cell_crossings
+    }
+
+    /// Collisions the TC model made elastic.
+    pub fn collapse_guard_fired(&self) -> u64 {
+        self.collapse_guard_fired
+    }
+
+    /// Processes every event up to time `t_end` (not before the current time), brings all
+    /// disks to `t_end` and writes their positions and velocities to `particles` (the set
+    /// this simulation started from, in the same storage order).
+    pub fn advance_to(&mut self, particles: &mut Particles, t_end: f64) {
+        self.run(t_end, u64::MAX);
+        self.time = self.time.max(t_end);
+        self.write_state(particles);
+    }
+
+    /// Processes events until `collisions` more pair or wall collisions have happened
+    /// (for benches: no time limit, no state written; call [`EventSim::advance_to`] with
+    /// [`EventSim::time`] to write it).
+    pub fn advance_collisions(&mut self, collisions: u64) {
+        self.run(f64::INFINITY, collisions);
+    }
+
+    fn run(&mut self, t_end: f64, max_collisions: u64) {
+        let start = self.counters.pair_collisions + self.counters.wall_collisions;
+        loop {
+            let (time, disk) = self.tree.earliest();
+            if time > t_end
+                || disk == NONE
+                || self.counters.pair_collisions + self.counters.wall_collisions - start
+                    >= max_collisions
+            {
+                return;
+            }
+            self.time = time;
+            self.events_since_reorder += 1;
+            if self.events_since_reorder
+                > EVENTS_PER_DISK_BETWEEN_REORDERS * self.flights.len() as u64
+            {
+                self.reorder();
+                continue;
+            }
+            let event = self.next[disk as usize];
+            match event.kind {
+                Kind::Nothing => return,
+                Kind::Pair { partner, count } => {
+                    if self.count[partner as usize] == count {
+                        self.collide(disk, partner);
+                    } else {
+                        // The partner changed course since: predict this disk afresh.
+                        self.predict(disk);
+                    }
+                }
+                Kind::Cross { axis, forward } => self.cross(disk, axis, forward),
+                Kind::Wall { axis } => self.bounce(disk, axis),
+            }
+        }
+    }
+
+    /// Brings every disk to the current time and writes the state to `particles`.
+    fn write_state(&mut self, particles: &mut Particles) {
+        let time = self.time;
+        for (flight, &idx) in self.flights.iter_mut().zip(&self.origin) {
+            let idx = idx as usize;
+            let (x, y) = flight.position_at(time);
+            (flight.x, flight.y, flight.t) = (x, y, time);
+            particles.x[idx] = x;
+            particles.y[idx] = y;
+            particles.vx[idx] = flight.vx;
+            particles.vy[idx] = flight.vy;
+        }
+    }
+
+    /// Brings one disk to the current time.
+    #[inline(always)]
+    fn bring_to_now(&mut self, disk: u32) {
+        let flight = &mut self.flights[disk as usize];
+        let (x, y) = flight.position_at(self.time);
+        (flight.x, flight.y, flight.t) = (x, y, self.time);
+    }
+
+    /// A pair collision of `a` and `b` at the current time.
+    fn collide(&mut self, a: u32, b: u32) {
+        self.bring_to_now(a);
+        self.bring_to_now(b);
+        let (fa, fb) = (self.flights[a as usize], self.flights[b as usize]);
+        let (dx, dy) = self.domain.separation(fa.x, fa.y, fb.x, fb.y);
+        let distance = dx.hypot(dy);
+        let contact = fa.radius + fb.radius;
+        let now = self.time;
+        let guarded =
+            now - fa.last_collision < self.params.tc || now - fb.last_collision < self.params.tc;
+        let e = if guarded {
+            self.collapse_guard_fired += u64::from(self.physics.restitution < 1.0);
+            1.0
+        } else {
+            self.physics.restitution
+        };
+        let side = |f: &Flight| PairSide {
+            mass: f.mass,
+            vx: f.vx,
+            vy: f.vy,
+        };
+        let ([[vax, vay], [vbx, vby]], impulse) =
+            exchange_along(e, dx / distance, dy / distance, side(&fa), side(&fb));
+        for (disk, vx, vy) in [(a, vax, vay), (b, vbx, vby)] {
+            let flight = &mut self.flights[disk as usize];
+            (flight.vx, flight.vy, flight.last_collision) = (vx, vy, now);
+            self.count[disk as usize] = self.count[disk as usize].wrapping_add(1);
+        }
+        let overlap = ((contact - distance) / contact).max(0.0);
+        let counters = &mut self.counters;
+        counters.pair_collisions += 1;
+        counters.max_overlap = counters.max_overlap.max(overlap);
+        counters.overlap_sum += overlap;
+        counters.virial += distance * impulse;
+        self.predict(a);
+        self.predict(b);
+    }
+
+    /// A wall bounce along `axis` at the current time.
+    fn bounce(&mut self, disk: u32, axis: u8) {
+        self.bring_to_now(disk);
+        let flight = &mut self.flights[disk as usize];
+        let e = self.physics.wall_restitution;
+        if axis == 0 {
+            flight.vx *= -e;
+        } else {
+            flight.vy *= -e;
+        }
+        self.count[disk as usize] = self.count[disk as usize].wrapping_add(1);
+        self.counters.wall_collisions += 1;
+        self.predict(disk);
+    }
+
+    /// A cell crossing along `axis` at the current time: the trajectory is unchanged, so
+    /// the best pair event found so far stays valid (if its partner did not change
+    /// course) and only the cells that entered the neighbourhood are searched.
+    fn cross(&mut self, disk: u32, axis: u8, forward: bool) {
+        self.bring_to_now(disk);
+        self.cell_crossings += 1;
+        let i = disk as usize;
+        let [col, row] = self.home[i];
+        let (old_col, old_row) = (col as usize, row as usize);
+        let step: i64 = if forward { 1 } else { -1 };
+        let (d_col, d_row) = if axis == 0 { (step, 0) } else { (0, step) };
+        let target = self
+            .cells
+            .offset(old_col, old_row, d_col, d_row)
+            .expect("crossings are only scheduled towards existing cells");
+        // Across a periodic edge the stored position moves to the new cell's image.
+        let flight = &mut self.flights[i];
+        flight.x -= target.shift_x;
+        flight.y -= target.shift_y;
+        self.cells.remove(disk, self.cells.index(old_col, old_row));
+        self.cells.insert(disk, target.cell);
+        let (new_col, new_row) = (
+            target.cell % self.cells.n_cols,
+            target.cell / self.cells.n_cols,
+        );
+        self.home[i] = [new_col as u32, new_row as u32];
+        let best = self.best_pair[i];
+        let still_valid = match best.kind {
+            Kind::Pair { partner, count } => self.count[partner as usize] == count,
+            _ => true,
+        };
+        if !still_valid {
+            self.predict(disk);
+            return;
+        }
+        let mut best = best;
+        for offset in -1..=1 {
+            let (c, r) = if axis == 0 {
+                (step, offset)
+            } else {
+                (offset, step)
+            };
+            if let Some(neighbour) = self.cells.offset(new_col, new_row, c, r) {
+                best = best.earlier(self.earliest_pair_in(disk, neighbour));
+            }
+        }
+        self.schedule(disk, best);
+    }
+
+    /// Predicts a disk's next event from scratch (it must be at the current time or be
+    /// brought there here).
+    fn predict(&mut self, disk: u32) {
+        self.bring_to_now(disk);
+        let [col, row] = self.home[disk as usize];
+        let (col, row) = (col as usize, row as usize);
+        let (n_cols, n_rows) = (self.cells.n_cols, self.cells.n_rows);
+        let mut best = NOTHING;
+        if col >= 1 && col + 1 < n_cols && row >= 1 && row + 1 < n_rows {
+            // Away from the edges: no wrapping, no shifts.
+            for r in row - 1..=row + 1 {
+                for c in col - 1..=col + 1 {
+                    let neighbour = Neighbour {
+                        cell: r * n_cols + c,
+                        shift_x: 0.0,
+                        shift_y: 0.0,
+                    };
+                    best = best.earlier(self.earliest_pair_in(disk, neighbour));
+                }
+            }
+        } else {
+            for neighbour in self.cells.neighbourhood(col, row) {
+                best = best.earlier(self.earliest_pair_in(disk, neighbour));
+            }
+        }
+        self.schedule(disk, best);
+    }
+
+    /// Records `best_pair` as the disk's best pair event and schedules the earliest of it,
+    /// its next cell crossing and its next wall bounce.
+    fn schedule(&mut self, disk: u32, best_pair: Scheduled) {
+        let i = disk as usize;
+        self.best_pair[i] = best_pair;
+        let next = best_pair
+            .earlier(self.crossing(disk, 0))
+            .earlier(self.crossing(disk, 1));
+        self.next[i] = next;
+        self.tree.set(disk, next.time);
+    }
+
+    /// The earliest collision of `disk` (at the current time) with a disk of `neighbour`.
+    #[inline(always)]
+    fn earliest_pair_in(&self, disk: u32, neighbour: Neighbour) -> Scheduled {
+        let now = self.time;
+        let a = &self.flights[disk as usize];
+        let mut best = NOTHING;
+        let mut other = self.cells.first_in_cell(neighbour.cell);
+        while other != NONE {
+            if other != disk {
+                let b = &self.flights[other as usize];
+                let (bx, by) = b.position_at(now);
+                let dx = bx + neighbour.shift_x - a.x;
+                let dy = by + neighbour.shift_y - a.y;
+                let wait = contact_wait(dx, dy, b.vx - a.vx, b.vy - a.vy, a.radius + b.radius);
+                if now + wait < best.time {
+                    best = Scheduled {
+                        time: now + wait,
+                        kind: Kind::Pair {
+                            partner: other,
+                            count: self.count[other as usize],
+                        },
+                    };
+                }
+            }
+            other = self.cells.next_in_cell(other);
+        }
+        best
+    }
+
+    /// The disk's next cell crossing or wall bounce along `axis`.
+    #[inline]
+    fn crossing(&self, disk: u32, axis: u8) -> Scheduled {
+        let i = disk as usize;
+        let f = &self.flights[i];
+        let (position, velocity, cell, cell_side, n_cells, length) = if axis == 0 {
+            let (w, n) = (self.cells.cell_width, self.cells.n_cols);
+            (f.x, f.vx, self.home[i][0] as usize, w, n, self.domain.width)
+        } else {
+            let (h, n) = (self.cells.cell_height, self.cells.n_rows);
+            (
+                f.y,
+                f.vy,
+                self.home[i][1] as usize,
+                h,
+                n,
+                self.domain.height,
+            )
+        };
+        if velocity == 0.0 {
+            return NOTHING;
+        }
+        let forward = velocity > 0.0;
+        let at_edge = if forward {
+            cell + 1 == n_cells
+        } else {
+            cell == 0
+        };
+        let (target, kind) = if at_edge && self.domain.boundary == Boundary::Walls {
+            let contact_at = if forward { length - f.radius } else { f.radius };
+            (contact_at, Kind::Wall { axis })
+        } else {
+            let boundary = if forward {
+                if cell + 1 == n_cells {
+                    length
+                } else {
+                    (cell + 1) as f64 * cell_side
+                }
+            } else {
+                cell as f64 * cell_side
+            };
+            (boundary, Kind::Cross { axis, forward })
+        };
+        Scheduled {
+            time: f.t + ((target - position) / velocity).max(0.0),
+            kind,
+        }
+    }
+}
+
+/// Replaces `values` by `map(values[old])` for each `old` of `order`.
+fn permute<T: Copy>(values: &mut Vec<T>, order: &[u32], map: impl Fn(T) -> T) {
+    *values = order.iter().map(|&old| map(values[old as usize])).collect();
+}
+
+/// Relative distance (of the squared contact distance) within which a pair counts as touching.
+const TOUCHING: f64 = 1e-10;
+
+/// Time until two disks at separation `(dx, dy)` (from a to b) with relative velocity
+/// `(dvx, dvy)` (b's minus a's) come within `contact`; infinite if they never do.
+/// Overlapping approaching pairs (rounding) collide at once; separating ones never.
+#[inline(always)]
+pub fn contact_wait(dx: f64, dy: f64, dvx: f64, dvy: f64, contact: f64) -> f64 {
+    let b = dx * dvx + dy * dvy;
+    if b >= 0.0 {
+        return f64::INFINITY;
+    }
+    let v2 = dvx * dvx + dvy * dvy;
+    let distance_sq = dx * dx + dy * dy;
+    let c = distance_sq - contact * contact;
+    if c < TOUCHING * contact * contact {
+        // Touching to rounding: a collision now if the pair really approaches; none if
+        // its normal approach is rounding-sized (below 1e-9 of the relative speed), as
+        // for a pair that e = 0 left at zero normal speed, which must not collide with
+        // zero impulse again and again.
+        return if b * b > 1e-18 * v2 * distance_sq {
+            0.0
+        } else {
+            f64::INFINITY
+        };
+    }
+    let discriminant = b * b - v2 * c;
+    if discriminant < 0.0 {
+        return f64::INFINITY;
+    }
+    // The smaller root c / (−b + √disc), written to avoid cancellation.
+    (c / (-b + discriminant.sqrt())).max(0.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::particles::Disk;
+
+    fn two_disks(
+        xa: f64,
+        vxa: f64,
+        xb: f64,
+        vxb: f64,
+        boundary: Boundary,
+    ) -> (EventSim, Particles) {
+        let disk = |x, vx| Disk {
+            x,
+            y: 50.0,
+            vx,
+            vy: 0.0,
+            radius: 1.0,
+            mass: 1.0,
+        };
+        let particles = Particles::from_disks(&[disk(xa, vxa), disk(xb, vxb)]);
+        let domain = Domain {
+            width: 100.0,
+            height: 100.0,
+            boundary,
+        };
+        let sim = EventSim::new(
+            domain,
+            Physics::elastic(),
+            EventParams { tc: 0.0 },
+            &particles,
+        );
+        (sim, particles)
+    }
+
+    #[test]
+    fn contact_wait_is_the_exact_root() {
+        // Gap 18 closed at relative speed 2.
+        assert_eq!(contact_wait(20.0, 0.0, -2.0, 0.0, 2.0), 9.0);
+        assert_eq!(contact_wait(20.0, 0.0, 2.0, 0.0, 2.0), f64::INFINITY);
+        // Passing by at an offset of 3 > 2: never.
+        assert_eq!(contact_wait(20.0, 3.0, -2.0, 0.0, 2.0), f64::INFINITY);
+        // Overlapping and approaching (rounding): at once.
+        assert_eq!(contact_wait(1.9, 0.0, -1.0, 0.0, 2.0), 0.0);
+        // Touching and sliding with a rounding-sized normal approach: never.
+        assert_eq!(contact_wait(2.0, 0.0, -1e-17, 1.0, 2.0), f64::INFINITY);
+    }
+
+    #[test]
+    fn head_on_pair_meets_at_the_exact_time_and_exchanges_velocities() {
+        let (mut sim, mut particles) = two_disks(40.0, 1.0, 60.0, -1.0, Boundary::Walls);
+        sim.advance_to(&mut particles, 8.999);
+        assert_eq!(sim.counters().pair_collisions, 0);
+        sim.advance_to(&mut particles, 10.0);
+        assert_eq!(sim.counters().pair_collisions, 1);
+        assert_eq!((particles.vx[0], particles.vx[1]), (-1.0, 1.0));
+        assert!((particles.x[0] - 48.0).abs() < 1e-12, "{}", particles.x[0]);
+        assert!((particles.x[1] - 52.0).abs() < 1e-12, "{}", particles.x[1]);
+    }
+
+    #[test]
+    fn periodic_pair_meets_across_the_edge() {
+        // 2 → wraps left, 97 → moving right: centres 5 apart through the edge, gap 3.
+        let (mut sim, mut particles) = two_disks(2.0, -0.5, 97.0, 0.5, Boundary::Periodic);
+        sim.advance_to(&mut particles, 2.9);
+        assert_eq!(sim.counters().pair_collisions, 0);
+        sim.advance_to(&mut particles, 3.1);
+        assert_eq!(sim.counters().pair_collisions, 1);
+        assert_eq!((particles.vx[0], particles.vx[1]), (0.5, -0.5));
+    }
+}
