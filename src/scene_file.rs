@@ -15,7 +15,9 @@ use crate::sim::scene::{
     check_periodic_box,
 };
 use crate::sim::{Boundary, Broadphase, Disk, Domain, Particles, Physics, Scene};
-use crate::spec::{DEFAULT_DT_FRACTION, DtChoice, MethodSpec, RunSpec, SceneSource};
+use crate::spec::{
+    DEFAULT_DT_FRACTION, DtChoice, InjectedSlowdown, MethodSpec, RunSpec, SceneSource,
+};
 
 /// Values given on the command line that replace the scene file's.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -86,7 +88,11 @@ pub fn parse(path: &Path, text: &str, overrides: &Overrides) -> Result<RunSpec, 
     } else {
         SceneSource::Gas(validator.gas(&raw.scene, overrides)?)
     };
-    Ok(RunSpec { scene, method })
+    Ok(RunSpec {
+        scene,
+        method,
+        slowdown: InjectedSlowdown::NONE,
+    })
 }
 
 #[derive(Deserialize)]

@@ -5,7 +5,7 @@ use std::num::NonZeroUsize;
 use collide::backend::{serial, threads};
 use collide::sim::scene::{GasSpec, MassRule, RadiusDistribution};
 use collide::sim::{Boundary, Broadphase, Physics};
-use collide::spec::{DtChoice, MethodSpec, RunSpec, SceneSource};
+use collide::spec::{DtChoice, InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
 
 /// Dilute and dense, walls and periodic, elastic and inelastic: the cases the issue names.
 fn scenes() -> Vec<(String, RunSpec)> {
@@ -37,6 +37,7 @@ fn run_spec(gas: GasSpec, broadphase: Broadphase) -> RunSpec {
             steps: 300,
             broadphase,
         },
+        slowdown: InjectedSlowdown::NONE,
     }
 }
 

@@ -3,7 +3,7 @@
 use collide::backend::serial;
 use collide::sim::scene::{GasSpec, Placement};
 use collide::sim::{Boundary, Broadphase, Physics, Stepper};
-use collide::spec::{DtChoice, MethodSpec, RunSpec, SceneSource};
+use collide::spec::{DtChoice, InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
 use collide::summary::RunSummary;
 
 fn gas(
@@ -29,6 +29,7 @@ fn spec(gas: GasSpec, dt: f64, steps: u64, broadphase: Broadphase) -> RunSpec {
             steps,
             broadphase,
         },
+        slowdown: InjectedSlowdown::NONE,
     }
 }
 

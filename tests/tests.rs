@@ -1,6 +1,7 @@
 //! All integration tests, built into one test binary.
 
 mod backends;
+mod check;
 mod cli;
 #[cfg(feature = "mpi")]
 mod mpi;

@@ -17,7 +17,9 @@ use std::ops::Range;
 use std::time::Instant;
 
 use crate::backend::comm::Communicator;
-use crate::backend::{BackendError, Measured, RunOutcome, StageSeconds, Workers, summarize, timed};
+use crate::backend::{
+    BackendError, Measured, RunOutcome, StageSeconds, Workers, step_loop, summarize, timed,
+};
 use crate::sim::collision::{PairSide, collide_pair};
 use crate::sim::grid::{Contact, Entry, StripGrid, StripLayout, receive_band, refresh_band};
 use crate::sim::observe::observe;
@@ -45,11 +47,9 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     let mut rank = RankState::new(comm, &prepared.scene, layout, &slabs);
     let setup_s = setup_start.elapsed().as_secs_f64();
 
-    let loop_start = Instant::now();
-    for _ in 0..prepared.steps {
-        rank.step(comm, prepared.params.dt);
-    }
-    let wall_s = loop_start.elapsed().as_secs_f64();
+    let wall_s = step_loop(prepared.steps, spec.slowdown, || {
+        rank.step(comm, prepared.params.dt)
+    });
 
     // Collective reductions: the whole state and the counters, on every rank.
     let mut mine = Vec::with_capacity(rank.particles.len() * PACKED_LEN);
@@ -464,7 +464,7 @@ mod tests {
     use crate::backend::serial;
     use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution};
     use crate::sim::{Broadphase, Physics};
-    use crate::spec::{DtChoice, MethodSpec, SceneSource};
+    use crate::spec::{DtChoice, InjectedSlowdown, MethodSpec, SceneSource};
 
     fn spec(boundary: Boundary, restitution: f64, packing: f64) -> RunSpec {
         RunSpec {
@@ -481,6 +481,7 @@ mod tests {
                 steps: 300,
                 broadphase: Broadphase::Grid,
             },
+            slowdown: InjectedSlowdown::NONE,
         }
     }
 

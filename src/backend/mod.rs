@@ -13,12 +13,12 @@ pub mod serial;
 pub mod threads;
 
 use std::num::NonZeroUsize;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use crate::sim::observe::{Observables, observe, state_hash};
 use crate::sim::scene::PlacementError;
 use crate::sim::{Particles, StepCounters};
-use crate::spec::PreparedRun;
+use crate::spec::{InjectedSlowdown, PreparedRun};
 use crate::summary::RunSummary;
 
 /// Which backend runs the steps, with its worker count.
@@ -86,6 +86,32 @@ pub fn timed<T>(seconds: &mut f64, work: impl FnOnce() -> T) -> T {
     let result = work();
     *seconds += start.elapsed().as_secs_f64();
     result
+}
+
+/// The stepping loop every backend times: `steps` calls of `step`, each followed by the
+/// injected extra work (none in real runs). Returns the loop's wall seconds.
+pub fn step_loop(steps: u64, slowdown: InjectedSlowdown, mut step: impl FnMut()) -> f64 {
+    let loop_start = Instant::now();
+    for _ in 0..steps {
+        let step_start = Instant::now();
+        step();
+        if slowdown.fraction() > 0.0 {
+            busy_work(step_start.elapsed().mul_f64(slowdown.fraction()));
+        }
+    }
+    loop_start.elapsed().as_secs_f64()
+}
+
+/// Integer work on this thread for `duration`: the injected slowdown of
+/// [`step_loop`]. It touches no memory the simulation uses.
+fn busy_work(duration: Duration) {
+    let start = Instant::now();
+    let mut x = 1_u64;
+    while start.elapsed() < duration {
+        for _ in 0..64 {
+            x = std::hint::black_box(x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1));
+        }
+    }
 }
 
 /// Where a run's workers went: the backend's name and its threads and ranks.

@@ -2,7 +2,9 @@
 
 use std::time::Instant;
 
-use crate::backend::{BackendError, Measured, RunOutcome, StageSeconds, Workers, summarize, timed};
+use crate::backend::{
+    BackendError, Measured, RunOutcome, StageSeconds, Workers, step_loop, summarize, timed,
+};
 use crate::sim::Stepper;
 use crate::sim::observe::observe;
 use crate::spec::RunSpec;
@@ -17,8 +19,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
     let initial = observe(&particles);
 
     let mut stages = StageSeconds::default();
-    let loop_start = Instant::now();
-    for _ in 0..prepared.steps {
+    let wall_s = step_loop(prepared.steps, spec.slowdown, || {
         timed(&mut stages.integration, || stepper.advance(&mut particles));
         timed(&mut stages.broad_phase, || {
             stepper.find_contacts(&mut particles)
@@ -26,8 +27,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
         timed(&mut stages.collisions, || {
             stepper.resolve_contacts(&mut particles)
         });
-    }
-    let wall_s = loop_start.elapsed().as_secs_f64();
+    });
 
     let measured = Measured {
         setup_s,

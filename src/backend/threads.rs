@@ -15,7 +15,9 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::backend::{BackendError, Measured, RunOutcome, StageSeconds, Workers, summarize, timed};
+use crate::backend::{
+    BackendError, Measured, RunOutcome, StageSeconds, Workers, step_loop, summarize, timed,
+};
 use crate::sim::collision::{PairSide, collide_pair};
 use crate::sim::grid::{
     Contact, Entry, StripGrid, find_contacts_all_pairs_from, number_slots, receive_band,
@@ -56,13 +58,11 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
     let setup_s = setup_start.elapsed().as_secs_f64();
     let initial = observe(&particles);
 
-    let loop_start = Instant::now();
-    pool.install(|| {
-        for _ in 0..prepared.steps {
-            stepper.step(&mut particles);
-        }
+    let wall_s = pool.install(|| {
+        step_loop(prepared.steps, spec.slowdown, || {
+            stepper.step(&mut particles)
+        })
     });
-    let wall_s = loop_start.elapsed().as_secs_f64();
 
     let measured = Measured {
         setup_s,

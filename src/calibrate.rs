@@ -1,0 +1,33 @@
+//! The calibration workload of `collide check`: fixed work that is none of the
+//! simulator's code, timed in the same run as the measured configurations, so that their
+//! times can be expressed in its units (a slower or busier machine slows both, a
+//! slower simulator only the configurations).
+
+use std::hint::black_box;
+use std::time::Instant;
+
+/// Values the workload reads and writes: 4 MiB, like the disks and grid of a scene of
+/// some 20,000 disks.
+const LEN: usize = 1 << 19;
+/// Passes over the values, each a pseudo-random walk through all of them.
+const PASSES: usize = 24;
+
+/// Seconds taken by the fixed workload: dependent loads from pseudo-random places in
+/// memory mixed with floating-point arithmetic, like a broad phase and its impulses.
+pub fn workload_seconds() -> f64 {
+    let start = Instant::now();
+    let mut values: Vec<f64> = (0..LEN).map(|i| i as f64).collect();
+    // A full-period linear congruential walk modulo LEN (odd increment, multiplier 1 mod 4).
+    let mut index = 1_usize;
+    let mut sum = 0.0;
+    for _ in 0..PASSES {
+        for _ in 0..LEN {
+            index = (index.wrapping_mul(1_103_515_245).wrapping_add(12_345)) & (LEN - 1);
+            let value = values[index];
+            sum += value.sqrt();
+            values[index] = 0.5 * value + 1.0;
+        }
+    }
+    black_box(sum);
+    start.elapsed().as_secs_f64()
+}
