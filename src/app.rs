@@ -26,7 +26,7 @@ pub enum Outcome {
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
-    match cli.command {
+    let done = match cli.command {
         Command::Simulate(args) => simulate(&args),
         Command::Run(args) => run_study(&args),
         Command::Results(args) => {
@@ -37,14 +37,16 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Render(args) => render_scene(&args),
         Command::Check(args) => return run_check(&args),
         Command::Calibrate => {
+            let seconds = calibrate::workload_seconds();
             let calibration = Calibration {
-                calibration_s: calibrate::workload_seconds(),
+                calibration_s: seconds.wall,
+                calibration_cpu_s: seconds.cpu,
             };
             println!("{}", serde_json::to_string(&calibration)?);
             Ok(())
         }
-    }
-    .map(|()| Outcome::Done)
+    };
+    done.map(|()| Outcome::Done)
 }
 
 fn run_check(args: &CheckArgs) -> anyhow::Result<Outcome> {

@@ -6,15 +6,18 @@
 use std::hint::black_box;
 use std::time::Instant;
 
+use crate::backend::{CpuScope, LoopSeconds, cpu_seconds};
+
 /// Values the workload reads and writes: 4 MiB, like the disks and grid of a scene of
 /// some 20,000 disks.
 const LEN: usize = 1 << 19;
 /// Passes over the values, each a pseudo-random walk through all of them.
-const PASSES: usize = 24;
+const PASSES: usize = 48;
 
-/// Seconds taken by the fixed workload: dependent loads from pseudo-random places in
+/// Wall and CPU seconds taken by the fixed workload: loads from pseudo-random places in
 /// memory mixed with floating-point arithmetic, like a broad phase and its impulses.
-pub fn workload_seconds() -> f64 {
+pub fn workload_seconds() -> LoopSeconds {
+    let cpu_start = cpu_seconds(CpuScope::Thread);
     let start = Instant::now();
     let mut values: Vec<f64> = (0..LEN).map(|i| i as f64).collect();
     // A full-period linear congruential walk modulo LEN (odd increment, multiplier 1 mod 4).
@@ -29,5 +32,9 @@ pub fn workload_seconds() -> f64 {
         }
     }
     black_box(sum);
-    start.elapsed().as_secs_f64()
+    let wall = start.elapsed().as_secs_f64();
+    let cpu = cpu_seconds(CpuScope::Thread)
+        .zip(cpu_start)
+        .map(|(end, start)| end - start);
+    LoopSeconds { wall, cpu }
 }

@@ -19,8 +19,8 @@ use crate::manifest::{self, Configuration};
 use crate::output::write_atomically;
 use crate::records::{self, Record, STATUS_OK};
 use crate::results::median;
-use crate::runner::{self, RunOptions};
-use crate::stats::{self, Interval, Sample, Verdict};
+use crate::runner::{self, Calibration, RunOptions};
+use crate::stats::{self, Interval, Verdict};
 
 /// How to run a check.
 #[derive(Clone, Debug)]
@@ -69,8 +69,8 @@ pub struct BaselineInfo {
     pub manifest_hash: String,
     /// Non-zero only for baselines recorded to test the check itself.
     pub inject_slowdown: f64,
-    /// Seconds of every calibration run of the baseline.
-    pub calibration_s: Vec<f64>,
+    /// Every calibration run, one per round of repetitions.
+    pub calibrations: Vec<Calibration>,
     pub instructions: Option<InstructionCount>,
     pub environment: Environment,
 }
@@ -87,13 +87,16 @@ pub struct InstructionCount {
 #[derive(Clone, Debug)]
 struct Row {
     what: String,
-    /// Median seconds (or instructions) of the baseline and of this run.
+    /// What `old` and `new` count: CPU or wall seconds, or instructions.
+    unit: &'static str,
+    /// Medians of the baseline and of this run, before normalisation.
     old: f64,
     new: f64,
-    /// new / old before normalisation.
-    raw_ratio: f64,
+    /// new / old after normalisation: the verdict's evidence.
     ratio: Interval,
     verdict: Verdict,
+    /// The normalised wall-time ratio, shown beside a verdict on CPU time.
+    wall: Option<Interval>,
     note: String,
 }
 
@@ -156,7 +159,7 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
         manifest: options.manifest.display().to_string(),
         manifest_hash,
         inject_slowdown: options.inject_slowdown,
-        calibration_s: outcome.calibration_s,
+        calibrations: outcome.calibrations,
         instructions,
         environment,
     };
@@ -167,7 +170,7 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
                 "baseline recorded in {} ({} runs, {} calibrations); commit it",
                 options.baseline.display(),
                 rows.len(),
-                info.calibration_s.len()
+                info.calibrations.len()
             );
             Ok(CheckOutcome::Passed)
         }
@@ -245,20 +248,72 @@ fn write_baseline(dir: &Path, info: &BaselineInfo, rows: &[Record]) -> anyhow::R
     write_atomically(&dir.join(BASELINE_INFO), |out| writeln!(out, "{json}"))
 }
 
-/// Wall times of the successful runs of each configuration, in first-seen order.
-fn times_by_configuration(rows: &[Record]) -> Vec<(String, Vec<f64>, &Record)> {
-    let mut order: Vec<(String, Vec<f64>, &Record)> = Vec::new();
+/// The successful runs of one configuration in one check. Each run is normalised by the
+/// calibration timed just before its round of repetitions (`calibrations[repetition]`),
+/// so that a busy spell of the machine slows both sides of the quotient.
+struct Runs<'a> {
+    first: &'a Record,
+    wall: Vec<f64>,
+    wall_normalised: Vec<f64>,
+    /// `None` when a run or a calibration has no CPU time.
+    cpu: Option<Vec<f64>>,
+    cpu_normalised: Option<Vec<f64>>,
+}
+
+/// The runs of each configuration, in first-seen order.
+fn runs_by_configuration<'a>(
+    rows: &'a [Record],
+    calibrations: &[Calibration],
+) -> anyhow::Result<Vec<Runs<'a>>> {
+    let mut order: Vec<Runs<'a>> = Vec::new();
     for row in rows.iter().filter(|r| r.status == STATUS_OK) {
-        match order.iter_mut().find(|(key, ..)| *key == row.config_key) {
-            Some((_, times, _)) => times.push(row.wall_s),
-            None => order.push((row.config_key.clone(), vec![row.wall_s], row)),
+        let Some(calibration) = calibrations.get(row.repetition as usize) else {
+            bail!(
+                "no calibration for repetition {} of {}; record the baseline again \
+                 with `collide check --update-baseline`",
+                row.repetition,
+                row.config_key
+            );
+        };
+        let index = match order
+            .iter()
+            .position(|r| r.first.config_key == row.config_key)
+        {
+            Some(index) => index,
+            None => {
+                order.push(Runs {
+                    first: row,
+                    wall: Vec::new(),
+                    wall_normalised: Vec::new(),
+                    cpu: Some(Vec::new()),
+                    cpu_normalised: Some(Vec::new()),
+                });
+                order.len() - 1
+            }
+        };
+        let runs = &mut order[index];
+        runs.wall.push(row.wall_s);
+        runs.wall_normalised
+            .push(row.wall_s / calibration.calibration_s);
+        match calibration
+            .calibration_cpu_s
+            .filter(|_| row.cpu_s.is_finite())
+        {
+            Some(calibration_cpu_s) => {
+                if let (Some(cpu), Some(normalised)) = (&mut runs.cpu, &mut runs.cpu_normalised) {
+                    cpu.push(row.cpu_s);
+                    normalised.push(row.cpu_s / calibration_cpu_s);
+                }
+            }
+            None => (runs.cpu, runs.cpu_normalised) = (None, None),
         }
     }
-    order
+    Ok(order)
 }
 
 /// One row per configuration of this run (and one for the instruction count), each
-/// compared with the baseline.
+/// compared with the baseline: on CPU time where both checks measured it, on wall time
+/// otherwise.
 fn compare(
     old_info: &BaselineInfo,
     old_rows: &[Record],
@@ -266,45 +321,59 @@ fn compare(
     new_rows: &[Record],
     noise: f64,
 ) -> anyhow::Result<Vec<Row>> {
-    let old: BTreeMap<String, (Vec<f64>, String)> = times_by_configuration(old_rows)
+    let old: BTreeMap<String, Runs<'_>> = runs_by_configuration(old_rows, &old_info.calibrations)?
         .into_iter()
-        .map(|(key, times, row)| (key, (times, row.state_hash.clone())))
+        .map(|runs| (runs.first.config_key.clone(), runs))
         .collect();
     let mut rows = Vec::new();
-    for (key, new_times, row) in times_by_configuration(new_rows) {
-        let Some((old_times, old_hash)) = old.get(&key) else {
+    for new in runs_by_configuration(new_rows, &new_info.calibrations)? {
+        let key = &new.first.config_key;
+        let Some(old) = old.get(key) else {
             bail!(
                 "the baseline has no runs of {key}; record one on purpose with \
                  `collide check --update-baseline`"
             );
         };
-        let new_sample = Sample {
-            times: &new_times,
-            calibration: &new_info.calibration_s,
-        };
-        let old_sample = Sample {
-            times: old_times,
-            calibration: &old_info.calibration_s,
-        };
         let seed = xxhash_rust::xxh3::xxh3_64(key.as_bytes());
-        let ratio = stats::ratio_of_medians(new_sample, old_sample, CONFIDENCE, seed);
-        let (old_median, new_median) = (
-            median(&mut old_times.clone()),
-            median(&mut new_times.clone()),
+        let ratio = |new: &[f64], old: &[f64]| stats::ratio_of_medians(new, old, CONFIDENCE, seed);
+        let wall = ratio(&new.wall_normalised, &old.wall_normalised);
+        let cpu = match (&new.cpu, &new.cpu_normalised, &old.cpu, &old.cpu_normalised) {
+            (Some(new_cpu), Some(new_normalised), Some(old_cpu), Some(old_normalised)) => Some((
+                median(&mut old_cpu.clone()),
+                median(&mut new_cpu.clone()),
+                ratio(new_normalised, old_normalised),
+            )),
+            _ => None,
+        };
+        let row = new.first;
+        let what = format!(
+            "{} {} ×{} (n = {})",
+            row.scene, row.backend, row.workers, row.n
         );
-        rows.push(Row {
-            what: format!(
-                "{} {} ×{} (n = {})",
-                row.scene, row.backend, row.workers, row.n
-            ),
-            old: old_median,
-            new: new_median,
-            raw_ratio: new_median / old_median,
-            ratio,
-            verdict: stats::verdict(&ratio, noise),
-            note: match *old_hash == row.state_hash {
-                true => String::new(),
-                false => "state_hash changed: the runs compute other states".to_owned(),
+        let note = match old.first.state_hash == row.state_hash {
+            true => String::new(),
+            false => "state_hash changed: the runs compute other states".to_owned(),
+        };
+        rows.push(match cpu {
+            Some((old_cpu, new_cpu, cpu)) => Row {
+                what,
+                unit: "CPU s",
+                old: old_cpu,
+                new: new_cpu,
+                ratio: cpu,
+                verdict: stats::verdict(&cpu, noise),
+                wall: Some(wall),
+                note,
+            },
+            None => Row {
+                what,
+                unit: "wall s",
+                old: median(&mut old.wall.clone()),
+                new: median(&mut new.wall.clone()),
+                ratio: wall,
+                verdict: stats::verdict(&wall, noise),
+                wall: None,
+                note,
             },
         });
     }
@@ -318,11 +387,12 @@ fn compare(
             };
             rows.push(Row {
                 what: "serial instructions (callgrind)".to_owned(),
+                unit: "instructions",
                 old: old.instructions as f64,
                 new: new.instructions as f64,
-                raw_ratio: ratio,
                 ratio: exact,
                 verdict: stats::verdict(&exact, INSTRUCTION_NOISE),
+                wall: None,
                 note: format!("noise threshold {:.0}%", 100.0 * INSTRUCTION_NOISE),
             });
         }
@@ -403,8 +473,16 @@ fn summary(
     );
     let describe = |info: &BaselineInfo| {
         let env = &info.environment;
+        let calibration = |pick: fn(&Calibration) -> Option<f64>| {
+            let mut values: Vec<f64> = info.calibrations.iter().filter_map(pick).collect();
+            match values.is_empty() {
+                true => "—".to_owned(),
+                false => format!("{:.4} s", median(&mut values)),
+            }
+        };
         format!(
-            "{} on {} ({}, {} logical cores), commit {}{}, recorded {}{}",
+            "{} on {} ({}, {} logical cores), commit {}{}, recorded {}{}; calibration median \
+             {} CPU, {} wall over {} rounds",
             env.profile,
             env.hostname,
             env.cpu_model,
@@ -415,7 +493,10 @@ fn summary(
             match info.inject_slowdown > 0.0 {
                 true => format!(", with an injected slowdown of {}", info.inject_slowdown),
                 false => String::new(),
-            }
+            },
+            calibration(|c| c.calibration_cpu_s),
+            calibration(|c| Some(c.calibration_s)),
+            info.calibrations.len()
         )
     };
     let _ = writeln!(out, "- manifest: `{}`", options.manifest.display());
@@ -426,23 +507,19 @@ fn summary(
         describe(old_info)
     );
     let _ = writeln!(out, "- this run: {}", describe(new_info));
-    let calibration = |info: &BaselineInfo| median(&mut info.calibration_s.clone());
     let _ = writeln!(
         out,
-        "- normalisation: each run's stepping time (`wall_s`) is divided by the median time of \
+        "- measure: the CPU seconds of each run's stepping loop (`cpu_s`, summed over threads \
+         and ranks; time spent waiting for a CPU is not counted), divided by the CPU seconds of \
          the calibration workload (`collide calibrate`, fixed work that is not simulator code) \
-         timed before every round of repetitions in the same check: median {:.4} s over {} \
-         runs in the baseline, {:.4} s over {} runs now",
-        calibration(old_info),
-        old_info.calibration_s.len(),
-        calibration(new_info),
-        new_info.calibration_s.len()
+         timed just before the run's round of repetitions; wall seconds (`wall_s`) divided by \
+         the calibration's wall seconds where CPU time is unknown, and shown beside it"
     );
     let _ = writeln!(
         out,
-        "- ratio = normalised median now / normalised median in the baseline, with its {:.0}% \
-         bootstrap interval ({} resamples of times and calibrations); regressed when the whole \
-         interval lies above {:.3}, improved when it lies below {:.3} (noise threshold {:.0}%)\n",
+        "- ratio = median normalised time now / in the baseline, with its {:.0}% bootstrap \
+         interval ({} resamples); regressed when the whole interval lies above {:.3}, improved \
+         when it lies below {:.3} (noise threshold {:.0}%)\n",
         100.0 * CONFIDENCE,
         stats::RESAMPLES,
         1.0 + options.noise,
@@ -451,20 +528,22 @@ fn summary(
     );
     let _ = writeln!(
         out,
-        "| configuration | baseline median | median now | raw ratio | ratio | {:.0}% interval | verdict | note |",
+        "| configuration | measure | baseline median | median now | ratio | {:.0}% interval | verdict | wall ratio (interval) | note |",
         100.0 * CONFIDENCE
     );
-    let _ = writeln!(out, "| --- | ---: | ---: | ---: | ---: | --- | --- | --- |");
+    let _ = writeln!(
+        out,
+        "| --- | --- | ---: | ---: | ---: | --- | --- | --- | --- |"
+    );
     for row in rows {
-        let (old, new) = match row.what.contains("instructions") {
-            true => (format!("{:.0}", row.old), format!("{:.0}", row.new)),
-            false => (format!("{:.4} s", row.old), format!("{:.4} s", row.new)),
-        };
+        let digits = if row.unit == "instructions" { 0 } else { 4 };
         let _ = writeln!(
             out,
-            "| {} | {old} | {new} | {:.3} | {:.3} | {:.3}–{:.3} | {} | {} |",
+            "| {} | {} | {:.digits$} | {:.digits$} | {:.3} | {:.3}–{:.3} | {} | {} | {} |",
             row.what,
-            row.raw_ratio,
+            row.unit,
+            row.old,
+            row.new,
             row.ratio.point,
             row.ratio.lower,
             row.ratio.upper,
@@ -472,6 +551,10 @@ fn summary(
                 Verdict::Regressed => "**regressed**",
                 verdict => verdict.name(),
             },
+            row.wall.map_or_else(String::new, |wall| format!(
+                "{:.3} ({:.3}–{:.3})",
+                wall.point, wall.lower, wall.upper
+            )),
             row.note
         );
     }

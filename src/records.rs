@@ -47,6 +47,8 @@ pub struct Record {
     pub boundary: String,
     pub broadphase: String,
     pub wall_s: f64,
+    /// CPU seconds of the stepping loop, summed over threads and ranks (NaN: unknown).
+    pub cpu_s: f64,
     pub setup_s: f64,
     pub fps: f64,
     pub particle_steps_per_s: f64,
@@ -117,6 +119,7 @@ impl Record {
         record.boundary = summary.boundary.clone();
         record.broadphase = summary.broadphase.clone();
         record.wall_s = summary.wall_s;
+        record.cpu_s = summary.cpu_s.unwrap_or(f64::NAN);
         record.setup_s = summary.setup_s;
         record.fps = summary.fps;
         record.particle_steps_per_s = summary.particle_steps_per_s;
@@ -170,6 +173,7 @@ impl Record {
             boundary: String::new(),
             broadphase: String::new(),
             wall_s: f64::NAN,
+            cpu_s: f64::NAN,
             setup_s: f64::NAN,
             fps: f64::NAN,
             particle_steps_per_s: f64::NAN,
@@ -266,7 +270,7 @@ macro_rules! for_each_column {
             u64: threads, ranks, workers, n, steps, pair_collisions, wall_collisions,
                  logical_cores, physical_cores, memory_bytes;
             u32: repetition;
-            f64: dt, packing, wall_s, setup_s, fps, particle_steps_per_s, integration_s,
+            f64: dt, packing, wall_s, cpu_s, setup_s, fps, particle_steps_per_s, integration_s,
                  broad_phase_s, collision_s, communication_s, kinetic_energy_initial,
                  kinetic_energy_final, momentum_initial_x, momentum_initial_y,
                  momentum_final_x, momentum_final_y, max_overlap, load_average_start,

@@ -44,8 +44,8 @@ pub struct StudyOutcome {
     pub failed: usize,
     /// Runs already in the file when resuming.
     pub kept: usize,
-    /// Seconds of each calibration run (empty unless asked for).
-    pub calibration_s: Vec<f64>,
+    /// Each calibration run, in order (empty unless asked for).
+    pub calibrations: Vec<Calibration>,
 }
 
 pub fn run_study(
@@ -159,15 +159,15 @@ pub fn run_study(
             .args(&options.simulate_args);
         run_with_timeout(command, study.timeout)
     };
-    let mut calibration_s = Vec::new();
+    let mut calibrations = Vec::new();
     let mut calibrate = || -> anyhow::Result<()> {
         let mut command = Command::new(&exe);
         command.arg("calibrate");
         match run_with_timeout(command, study.timeout)? {
             Ended::Exited { status, stdout, .. } if status.success() => {
-                let seconds: Calibration = serde_json::from_str(stdout.trim())
+                let calibration = serde_json::from_str(stdout.trim())
                     .context("`collide calibrate` printed no calibration time")?;
-                calibration_s.push(seconds.calibration_s);
+                calibrations.push(calibration);
                 Ok(())
             }
             _ => bail!("the calibration workload (`collide calibrate`) failed"),
@@ -253,15 +253,18 @@ pub fn run_study(
         measured,
         failed,
         kept,
-        calibration_s,
+        calibrations,
     })
 }
 
-/// What `collide calibrate` prints: one JSON object.
-#[derive(Debug, serde::Deserialize, serde::Serialize)]
+/// What `collide calibrate` prints: one JSON object, the times of
+/// [`crate::calibrate::workload_seconds`].
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
 pub struct Calibration {
-    /// Seconds of [`crate::calibrate::workload_seconds`].
+    /// Wall seconds.
     pub calibration_s: f64,
+    /// CPU seconds; null where unknown.
+    pub calibration_cpu_s: Option<f64>,
 }
 
 /// xxh3 of a manifest's text, as recorded in `manifest_hash`.

@@ -18,7 +18,8 @@ use std::time::Instant;
 
 use crate::backend::comm::Communicator;
 use crate::backend::{
-    BackendError, Measured, RunOutcome, StageSeconds, Workers, step_loop, summarize, timed,
+    BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop, summarize,
+    timed,
 };
 use crate::sim::collision::{PairSide, collide_pair};
 use crate::sim::grid::{Contact, Entry, StripGrid, StripLayout, receive_band, refresh_band};
@@ -47,7 +48,7 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     let mut rank = RankState::new(comm, &prepared.scene, layout, &slabs);
     let setup_s = setup_start.elapsed().as_secs_f64();
 
-    let wall_s = step_loop(prepared.steps, spec.slowdown, || {
+    let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, || {
         rank.step(comm, prepared.params.dt)
     });
 
@@ -63,11 +64,12 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         c.pair_collisions as f64,
         c.wall_collisions as f64,
         c.max_overlap,
-        wall_s,
+        seconds.wall,
         s.integration,
         s.broad_phase,
         s.collisions,
         s.communication,
+        seconds.cpu.unwrap_or(f64::NAN),
     ];
     let all_figures = comm.all_gather(&figures);
     if comm.rank() != 0 {
@@ -80,6 +82,8 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     let mut counters = rank.shared_counters;
     let mut stages = StageSeconds::default();
     let mut slowest_wall_s = 0.0_f64;
+    // Summed in rank order: the same total on every run of the same measurements.
+    let mut cpu_s = 0.0_f64;
     for f in &all_figures {
         counters.merge(&StepCounters {
             pair_collisions: f[0] as u64,
@@ -92,10 +96,12 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         stages.broad_phase = stages.broad_phase.max(f[5]);
         stages.collisions = stages.collisions.max(f[6]);
         stages.communication = stages.communication.max(f[7]);
+        cpu_s += f[8];
     }
     let measured = Measured {
         setup_s,
         wall_s: slowest_wall_s,
+        cpu_s: Some(cpu_s).filter(|s| s.is_finite()),
         stages,
         counters,
         initial: observe(&scene.particles),

@@ -88,29 +88,113 @@ pub fn timed<T>(seconds: &mut f64, work: impl FnOnce() -> T) -> T {
     result
 }
 
+/// Whose CPU time a backend's stepping loop counts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CpuScope {
+    /// The calling thread (serial; one rank, whose ranks' times are then summed).
+    Thread,
+    /// Every thread of this process (the rayon pool).
+    Process,
+}
+
+/// CPU seconds run so far by this thread or process, from Linux's scheduler statistics
+/// (`/proc/.../schedstat`, nanoseconds; time spent waiting for a CPU is not counted).
+/// `None` where the kernel does not provide them.
+pub fn cpu_seconds(scope: CpuScope) -> Option<f64> {
+    let on_cpu = |path: &std::path::Path| -> Option<u64> {
+        std::fs::read_to_string(path)
+            .ok()?
+            .split_whitespace()
+            .next()?
+            .parse()
+            .ok()
+    };
+    let nanoseconds = match scope {
+        CpuScope::Thread => on_cpu("/proc/thread-self/schedstat".as_ref())?,
+        CpuScope::Process => std::fs::read_dir("/proc/self/task")
+            .ok()?
+            .map(|task| on_cpu(&task.ok()?.path().join("schedstat")))
+            .sum::<Option<u64>>()?,
+    };
+    Some(nanoseconds as f64 * 1e-9)
+}
+
+/// Wall and CPU seconds of a stepping loop.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoopSeconds {
+    pub wall: f64,
+    /// CPU seconds of the threads in `scope` (`None` where unknown).
+    pub cpu: Option<f64>,
+}
+
 /// The stepping loop every backend times: `steps` calls of `step`, each followed by the
-/// injected extra work (none in real runs). Returns the loop's wall seconds.
-pub fn step_loop(steps: u64, slowdown: InjectedSlowdown, mut step: impl FnMut()) -> f64 {
+/// injected extra work (none in real runs).
+///
+/// The extra work is CPU work, not a wait: `fraction` times the fastest step so far, in
+/// rounds of integer arithmetic counted at a rate measured before the loop. So it is
+/// slowed by a busy machine like the step itself, and a step that was slowed by a
+/// neighbour does not inflate it (a wait for `fraction` of each step's own time would).
+pub fn step_loop(
+    steps: u64,
+    slowdown: InjectedSlowdown,
+    scope: CpuScope,
+    mut step: impl FnMut(),
+) -> LoopSeconds {
+    let fraction = slowdown.fraction();
+    let padding = (fraction > 0.0).then(BusyWork::measured);
+    let mut fastest = Duration::MAX;
+    let cpu_start = cpu_seconds(scope);
     let loop_start = Instant::now();
     for _ in 0..steps {
         let step_start = Instant::now();
         step();
-        if slowdown.fraction() > 0.0 {
-            busy_work(step_start.elapsed().mul_f64(slowdown.fraction()));
+        if let Some(padding) = &padding {
+            fastest = fastest.min(step_start.elapsed());
+            padding.run_for(fastest.mul_f64(fraction));
         }
     }
-    loop_start.elapsed().as_secs_f64()
+    let wall = loop_start.elapsed().as_secs_f64();
+    let cpu = cpu_seconds(scope)
+        .zip(cpu_start)
+        .map(|(end, start)| end - start);
+    LoopSeconds { wall, cpu }
 }
 
-/// Integer work on this thread for `duration`: the injected slowdown of
-/// [`step_loop`]. It touches no memory the simulation uses.
-fn busy_work(duration: Duration) {
-    let start = Instant::now();
-    let mut x = 1_u64;
-    while start.elapsed() < duration {
-        for _ in 0..64 {
-            x = std::hint::black_box(x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1));
+/// Integer work on this thread that touches no memory of the simulation: the injected
+/// slowdown of [`step_loop`].
+struct BusyWork {
+    rounds_per_second: f64,
+}
+
+impl BusyWork {
+    const PROBE_ROUNDS: u64 = 100_000;
+
+    /// The rate of the fastest of a few short probes (the machine undisturbed).
+    fn measured() -> BusyWork {
+        let fastest = (0..5)
+            .map(|_| {
+                let start = Instant::now();
+                busy_rounds(Self::PROBE_ROUNDS);
+                start.elapsed()
+            })
+            .min()
+            .unwrap_or(Duration::from_millis(1))
+            .max(Duration::from_nanos(1));
+        BusyWork {
+            rounds_per_second: Self::PROBE_ROUNDS as f64 / fastest.as_secs_f64(),
         }
+    }
+
+    /// As many rounds as take `duration` on an undisturbed machine.
+    fn run_for(&self, duration: Duration) {
+        busy_rounds((duration.as_secs_f64() * self.rounds_per_second).round() as u64);
+    }
+}
+
+fn busy_rounds(rounds: u64) {
+    let mut x = 1_u64;
+    for _ in 0..rounds {
+        x = std::hint::black_box(x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1));
     }
 }
 
@@ -149,6 +233,8 @@ fn count_cpu_list(list: &str) -> Option<usize> {
 pub struct Measured {
     pub setup_s: f64,
     pub wall_s: f64,
+    /// CPU seconds of the stepping loop, summed over threads and ranks.
+    pub cpu_s: Option<f64>,
     pub stages: StageSeconds,
     pub counters: StepCounters,
     pub initial: Observables,
@@ -181,6 +267,7 @@ pub fn summarize(
         packing: prepared.scene.packing(),
         seed: prepared.seed,
         wall_s,
+        cpu_s: measured.cpu_s,
         setup_s: measured.setup_s,
         fps: steps as f64 / wall_s,
         particle_steps_per_s: (n as f64 * steps as f64) / wall_s,

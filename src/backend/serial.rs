@@ -3,7 +3,8 @@
 use std::time::Instant;
 
 use crate::backend::{
-    BackendError, Measured, RunOutcome, StageSeconds, Workers, step_loop, summarize, timed,
+    BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop, summarize,
+    timed,
 };
 use crate::sim::Stepper;
 use crate::sim::observe::observe;
@@ -19,7 +20,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
     let initial = observe(&particles);
 
     let mut stages = StageSeconds::default();
-    let wall_s = step_loop(prepared.steps, spec.slowdown, || {
+    let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, || {
         timed(&mut stages.integration, || stepper.advance(&mut particles));
         timed(&mut stages.broad_phase, || {
             stepper.find_contacts(&mut particles)
@@ -31,7 +32,8 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
 
     let measured = Measured {
         setup_s,
-        wall_s,
+        wall_s: seconds.wall,
+        cpu_s: seconds.cpu,
         stages,
         counters: stepper.counters(),
         initial,
