@@ -144,13 +144,7 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
 }
 
 fn run_study(args: &RunArgs) -> anyhow::Result<()> {
-    let text = std::fs::read_to_string(&args.manifest).with_context(|| {
-        format!(
-            "cannot read manifest {}; check the path",
-            args.manifest.display()
-        )
-    })?;
-    let study = manifest::parse(&args.manifest, &text)?;
+    let (study, text) = manifest::load(&args.manifest)?;
     let options = RunOptions {
         out: args.out.clone(),
         resume: args.resume,

@@ -101,13 +101,7 @@ struct Row {
 }
 
 pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
-    let text = std::fs::read_to_string(&options.manifest).with_context(|| {
-        format!(
-            "cannot read the check's manifest {}; check the path",
-            options.manifest.display()
-        )
-    })?;
-    let study = manifest::parse(&options.manifest, &text)?;
+    let (study, text) = manifest::load(&options.manifest)?;
     let environment = Environment::capture();
     let manifest_hash = runner::manifest_hash(&text);
     let baseline = match options.update_baseline {

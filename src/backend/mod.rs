@@ -13,7 +13,7 @@ pub mod serial;
 pub mod threads;
 
 use std::num::NonZeroUsize;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use crate::sim::observe::{Observables, observe, state_hash};
 use crate::sim::scene::PlacementError;
@@ -130,10 +130,11 @@ pub struct LoopSeconds {
 /// The stepping loop every backend times: `steps` calls of `step`, each followed by the
 /// injected extra work (none in real runs).
 ///
-/// The extra work is CPU work, not a wait: `fraction` times the fastest step so far, in
-/// rounds of integer arithmetic counted at a rate measured before the loop. So it is
-/// slowed by a busy machine like the step itself, and a step that was slowed by a
-/// neighbour does not inflate it (a wait for `fraction` of each step's own time would).
+/// The extra work is integer arithmetic on the calling thread, counted on the clock that
+/// `collide check` compares: after each step it runs until the CPU seconds of `scope`
+/// have grown by `fraction` of what the step itself took (wall seconds where CPU time is
+/// unknown). A fraction of 0.1 therefore makes the loop's CPU time 10% larger whatever
+/// else runs on the machine; what one step overshoots, the next one owes less.
 pub fn step_loop(
     steps: u64,
     slowdown: InjectedSlowdown,
@@ -141,16 +142,26 @@ pub fn step_loop(
     mut step: impl FnMut(),
 ) -> LoopSeconds {
     let fraction = slowdown.fraction();
-    let padding = (fraction > 0.0).then(BusyWork::measured);
-    let mut fastest = Duration::MAX;
     let cpu_start = cpu_seconds(scope);
     let loop_start = Instant::now();
-    for _ in 0..steps {
-        let step_start = Instant::now();
-        step();
-        if let Some(padding) = &padding {
-            fastest = fastest.min(step_start.elapsed());
-            padding.run_for(fastest.mul_f64(fraction));
+    if fraction > 0.0 {
+        let clock = || cpu_seconds(scope).unwrap_or_else(|| loop_start.elapsed().as_secs_f64());
+        let mut owed = 0.0;
+        for _ in 0..steps {
+            let before = clock();
+            step();
+            let mut now = clock();
+            owed += fraction * (now - before);
+            while owed > 0.0 {
+                busy_rounds(BUSY_ROUNDS);
+                let later = clock();
+                owed -= later - now;
+                now = later;
+            }
+        }
+    } else {
+        for _ in 0..steps {
+            step();
         }
     }
     let wall = loop_start.elapsed().as_secs_f64();
@@ -160,37 +171,10 @@ pub fn step_loop(
     LoopSeconds { wall, cpu }
 }
 
-/// Integer work on this thread that touches no memory of the simulation: the injected
-/// slowdown of [`step_loop`].
-struct BusyWork {
-    rounds_per_second: f64,
-}
+/// Rounds of injected work between two looks at the clock (a few microseconds).
+const BUSY_ROUNDS: u64 = 2000;
 
-impl BusyWork {
-    const PROBE_ROUNDS: u64 = 100_000;
-
-    /// The rate of the fastest of a few short probes (the machine undisturbed).
-    fn measured() -> BusyWork {
-        let fastest = (0..5)
-            .map(|_| {
-                let start = Instant::now();
-                busy_rounds(Self::PROBE_ROUNDS);
-                start.elapsed()
-            })
-            .min()
-            .unwrap_or(Duration::from_millis(1))
-            .max(Duration::from_nanos(1));
-        BusyWork {
-            rounds_per_second: Self::PROBE_ROUNDS as f64 / fastest.as_secs_f64(),
-        }
-    }
-
-    /// As many rounds as take `duration` on an undisturbed machine.
-    fn run_for(&self, duration: Duration) {
-        busy_rounds((duration.as_secs_f64() * self.rounds_per_second).round() as u64);
-    }
-}
-
+/// Integer work that touches no memory of the simulation.
 fn busy_rounds(rounds: u64) {
     let mut x = 1_u64;
     for _ in 0..rounds {
