@@ -97,26 +97,21 @@ pub enum CpuScope {
     Process,
 }
 
-/// CPU seconds run so far by this thread or process, from Linux's scheduler statistics
-/// (`/proc/.../schedstat`, nanoseconds; time spent waiting for a CPU is not counted).
-/// `None` where the kernel does not provide them.
+/// CPU seconds run so far by this thread or process (`clock_gettime`'s CPU-time clocks,
+/// exact to the nanosecond; time spent waiting for a CPU is not counted). `None` where
+/// the system does not provide them.
 pub fn cpu_seconds(scope: CpuScope) -> Option<f64> {
-    let on_cpu = |path: &std::path::Path| -> Option<u64> {
-        std::fs::read_to_string(path)
-            .ok()?
-            .split_whitespace()
-            .next()?
-            .parse()
-            .ok()
+    let clock = match scope {
+        CpuScope::Thread => libc::CLOCK_THREAD_CPUTIME_ID,
+        CpuScope::Process => libc::CLOCK_PROCESS_CPUTIME_ID,
     };
-    let nanoseconds = match scope {
-        CpuScope::Thread => on_cpu("/proc/thread-self/schedstat".as_ref())?,
-        CpuScope::Process => std::fs::read_dir("/proc/self/task")
-            .ok()?
-            .map(|task| on_cpu(&task.ok()?.path().join("schedstat")))
-            .sum::<Option<u64>>()?,
+    let mut now = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
     };
-    Some(nanoseconds as f64 * 1e-9)
+    // SAFETY: `now` is a valid, writable timespec for the duration of the call.
+    let status = unsafe { libc::clock_gettime(clock, &mut now) };
+    (status == 0).then(|| now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9)
 }
 
 /// Wall and CPU seconds of a stepping loop.
