@@ -1,21 +1,25 @@
 //! The calibration workload of `collide check`: fixed work that is none of the
 //! simulator's code, timed in the same run as the measured configurations, so that their
-//! times can be expressed in its units (a slower or busier machine slows both, a
-//! slower simulator only the configurations).
+//! times can be expressed in its units (a slower core slows both, a slower simulator
+//! only the configurations).
+//!
+//! It works in the first-level cache on purpose. A first draft walked a 4 MiB array:
+//! its CPU time fell by 12% when the machine's other jobs stopped competing for the
+//! shared caches while the simulator's hardly moved, and that difference alone was
+//! reported as a 12–18% regression in A/A checks.
 
 use std::hint::black_box;
 use std::time::Instant;
 
 use crate::backend::{CpuScope, LoopSeconds, cpu_seconds};
 
-/// Values the workload reads and writes: 4 MiB, like the disks and grid of a scene of
-/// some 20,000 disks.
-const LEN: usize = 1 << 19;
+/// Values the workload reads and writes: 32 KiB, within a core's first-level cache.
+const LEN: usize = 1 << 12;
 /// Passes over the values, each a pseudo-random walk through all of them.
-const PASSES: usize = 48;
+const PASSES: usize = 5000;
 
-/// Wall and CPU seconds taken by the fixed workload: loads from pseudo-random places in
-/// memory mixed with floating-point arithmetic, like a broad phase and its impulses.
+/// Wall and CPU seconds taken by the fixed workload: loads from pseudo-random places
+/// mixed with floating-point arithmetic, like a broad phase and its impulses.
 pub fn workload_seconds() -> LoopSeconds {
     let cpu_start = cpu_seconds(CpuScope::Thread);
     let start = Instant::now();
