@@ -55,7 +55,7 @@ pub struct CheckArgs {
     pub out: PathBuf,
     /// Relative change that counts as noise: a configuration regressed only when the
     /// whole confidence interval of its time ratio lies above 1 + this.
-    #[arg(long, value_name = "FRACTION", default_value_t = 0.05, value_parser = parse_fraction)]
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.10, value_parser = parse_fraction)]
     pub noise: f64,
     /// Add this fraction of extra work to every step of the measured runs (testing only).
     #[arg(long, value_name = "FRACTION", default_value_t = 0.0, value_parser = parse_fraction, hide = true)]
