@@ -111,7 +111,7 @@ pub fn cpu_seconds(scope: CpuScope) -> Option<f64> {
     };
     // SAFETY: `now` is a valid, writable timespec for the duration of the call.
     let status = unsafe { libc::clock_gettime(clock, &mut now) };
-    (status == 0).then(|| now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9)
+    (status == 0).then_some(now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9)
 }
 
 /// Wall and CPU seconds of a stepping loop.
