@@ -1,18 +1,26 @@
 //! Criterion benches of the simulator's kernels: one full serial step, the broad phase
-//! and the contact resolution at N = 100,000, and one full step of the serial and the
-//! rayon (2 threads) backends at N = 1,000,000, for a dilute and a dense gas.
+//! (grid build and pair search) and the contact resolution at N = 100,000; one full step
+//! of the serial and the rayon (2 threads) backends at N = 1,000,000; and one step of
+//! the distributed backend on 2 ranks as threads (`ThreadComm`) at N = 100,000, through
+//! the same stepping loop (`backend::step_loop`) that `collide simulate` and
+//! `collide check` time. Each for a dilute and a dense gas.
 //!
 //! Throughput is in disks per iteration, so criterion's "elem/s" is particle-steps per second;
 //! in the `event` group it is collisions (pair and wall) per second of the event-driven
 //! method at N = 10^4 and 10^5 in a periodic box.
 //! Run: `cargo bench --bench kernels` (MPI runs need `mpirun`: see the README's Speed section).
 
+use std::time::Duration;
+
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 
+use collide::backend::comm::ThreadComm;
+use collide::backend::distributed;
 use collide::backend::threads::ThreadedStepper;
 use collide::sim::event::{EventParams, EventSim};
 use collide::sim::scene::GasSpec;
 use collide::sim::{Boundary, Broadphase, Particles, Scene, StepParams, Stepper};
+use collide::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
 
 /// r = 1 and v_rms = 1 stepped with dt = 0.1, so v_rms·dt = 0.1·r.
 const PARAMS: StepParams = StepParams {
@@ -21,13 +29,17 @@ const PARAMS: StepParams = StepParams {
 };
 const WARM_UP_STEPS: usize = 50;
 
-fn gas(n_particles: usize, packing: f64) -> Scene {
+fn gas_spec(n_particles: usize, packing: f64) -> GasSpec {
     GasSpec {
         seed: 42,
         ..GasSpec::unit(n_particles, packing)
     }
-    .build()
-    .expect("packings below jamming place")
+}
+
+fn gas(n_particles: usize, packing: f64) -> Scene {
+    gas_spec(n_particles, packing)
+        .build()
+        .expect("packings below jamming place")
 }
 
 /// The scene's disks after the warm-up steps of a serial stepper, and that stepper.
@@ -121,5 +133,50 @@ fn event_throughput(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, serial_kernels, backend_steps, event_throughput);
+/// One step of the distributed backend on 2 ranks that are threads of this process
+/// (`ThreadComm` instead of MPI): each sample is one run of as many steps as criterion
+/// asks for, timed by the run's own stepping loop (`wall_s`, the slowest rank), so the
+/// set-up of the ranks is left out.
+fn distributed_step(c: &mut Criterion) {
+    const N: usize = 100_000;
+    const RANKS: usize = 2;
+    let mut group = c.benchmark_group("distributed_step");
+    group.throughput(Throughput::Elements(N as u64));
+    group.sample_size(10);
+    for packing in [0.05, 0.3] {
+        group.bench_function(BenchmarkId::new("2_ranks_as_threads", packing), |b| {
+            b.iter_custom(|steps| {
+                let spec = RunSpec {
+                    scene: SceneSource::Gas(gas_spec(N, packing)),
+                    method: MethodSpec::stepped(PARAMS.dt, steps.max(1), PARAMS.broadphase),
+                    slowdown: InjectedSlowdown::NONE,
+                };
+                let spec = &spec;
+                let wall_s = std::thread::scope(|scope| {
+                    let ranks: Vec<_> = ThreadComm::group(RANKS)
+                        .into_iter()
+                        .map(|comm| scope.spawn(move || distributed::run(&comm, spec)))
+                        .collect();
+                    let outcomes: Vec<_> = ranks.into_iter().map(|r| r.join()).collect();
+                    outcomes
+                        .into_iter()
+                        .find_map(|outcome| outcome.expect("a rank ran").expect("placed"))
+                        .expect("rank 0 reports")
+                        .summary
+                        .wall_s
+                });
+                Duration::from_secs_f64(wall_s)
+            });
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(
+    benches,
+    serial_kernels,
+    backend_steps,
+    distributed_step,
+    event_throughput
+);
 criterion_main!(benches);

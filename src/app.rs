@@ -5,17 +5,28 @@ use std::num::NonZeroUsize;
 use anyhow::{Context, bail};
 
 use crate::backend::{BackendSpec, RunOutcome, serial, threads};
-use crate::cli::{BackendName, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs};
+use crate::check::{CheckOptions, CheckOutcome};
+use crate::cli::{
+    BackendName, CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs,
+};
 use crate::output::{write_atomically, write_state_csv};
-use crate::runner::RunOptions;
+use crate::runner::{Calibration, RunOptions};
 use crate::scene_file;
-use crate::spec::Method;
+use crate::spec::{InjectedSlowdown, Method};
 #[cfg(feature = "mpi")]
 use crate::summary::RunSummary;
-use crate::{analysis, figures, manifest, render, report, results, runner};
+use crate::{analysis, calibrate, check, figures, manifest, render, report, results, runner};
 
-pub fn run(cli: Cli) -> anyhow::Result<()> {
-    match cli.command {
+/// How a command that did its job ended: `main` maps this to the exit code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    Done,
+    /// `collide check` found a regression (exit code 1).
+    Regressed,
+}
+
+pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
+    let done = match cli.command {
         Command::Simulate(args) => simulate(&args),
         Command::Run(args) => run_study(&args),
         Command::Results(args) => {
@@ -24,7 +35,34 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Report(args) => write_report(&args),
         Command::Render(args) => render_scene(&args),
-    }
+        Command::Check(args) => return run_check(&args),
+        Command::Calibrate => {
+            let seconds = calibrate::workload_seconds();
+            let calibration = Calibration {
+                calibration_s: seconds.wall,
+                calibration_cpu_s: seconds.cpu,
+            };
+            println!("{}", serde_json::to_string(&calibration)?);
+            Ok(())
+        }
+    };
+    done.map(|()| Outcome::Done)
+}
+
+fn run_check(args: &CheckArgs) -> anyhow::Result<Outcome> {
+    let options = CheckOptions {
+        manifest: args.manifest.clone(),
+        baseline: args.baseline.clone(),
+        update_baseline: args.update_baseline,
+        out: args.out.clone(),
+        noise: args.noise,
+        inject_slowdown: args.inject_slowdown,
+        quiet: args.quiet,
+    };
+    Ok(match check::run(&options)? {
+        CheckOutcome::Passed => Outcome::Done,
+        CheckOutcome::Regressed => Outcome::Regressed,
+    })
 }
 
 fn render_scene(args: &RenderArgs) -> anyhow::Result<()> {
@@ -106,17 +144,13 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
 }
 
 fn run_study(args: &RunArgs) -> anyhow::Result<()> {
-    let text = std::fs::read_to_string(&args.manifest).with_context(|| {
-        format!(
-            "cannot read manifest {}; check the path",
-            args.manifest.display()
-        )
-    })?;
-    let study = manifest::parse(&args.manifest, &text)?;
+    let (study, text) = manifest::load(&args.manifest)?;
     let options = RunOptions {
         out: args.out.clone(),
         resume: args.resume,
         quiet: args.quiet,
+        simulate_args: Vec::new(),
+        calibrate: false,
     };
     let outcome = runner::run_study(&study, &text, &options)?;
     println!(
@@ -142,7 +176,7 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
 
 fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let backend = backend_spec(args)?;
-    let spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
+    let mut spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
     if spec.method.method == Method::Event && backend != BackendSpec::Serial {
         bail!(
             "{}: the event method runs on the serial backend only; drop --backend {} \
@@ -151,6 +185,8 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
             args.backend.name()
         );
     }
+    spec.slowdown = InjectedSlowdown::new(args.inject_slowdown)
+        .context("--inject-slowdown takes a fraction of 0 or more")?;
     let context = || format!("{}", args.scene.display());
     let finished = match backend {
         BackendSpec::Serial => Finished::Here(serial::run(&spec).with_context(context)?),

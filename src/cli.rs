@@ -32,6 +32,38 @@ pub enum Command {
     Report(ReportArgs),
     /// Draw a scene: a PNG of its disks after the run, and/or a GIF of the run.
     Render(RenderArgs),
+    /// CI timing check: run a small manifest and compare it with a recorded baseline
+    /// (exit 0: nothing regressed, 1: a regression, 2: an error).
+    Check(CheckArgs),
+    /// Time the fixed calibration workload that `collide check` normalises by.
+    #[command(hide = true)]
+    Calibrate,
+}
+
+#[derive(Debug, Args)]
+pub struct CheckArgs {
+    /// The manifest to time.
+    #[arg(default_value = "experiments/ci.toml")]
+    pub manifest: PathBuf,
+    /// The baseline folder (committed; written only with --update-baseline).
+    #[arg(long, value_name = "DIR", default_value = "results/baseline")]
+    pub baseline: PathBuf,
+    /// Record this run as the new baseline instead of comparing with the old one.
+    #[arg(long)]
+    pub update_baseline: bool,
+    /// Folder for this run's records and its markdown summary (summary.md).
+    #[arg(long, value_name = "DIR", default_value = "results/check")]
+    pub out: PathBuf,
+    /// Relative change that counts as noise: a configuration regressed only when the
+    /// whole confidence interval of its time ratio lies above 1 + this.
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.10, value_parser = parse_fraction)]
+    pub noise: f64,
+    /// Add this fraction of extra work to every step of the measured runs (testing only).
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.0, value_parser = parse_fraction, hide = true)]
+    pub inject_slowdown: f64,
+    /// No progress bar or notes.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 #[derive(Debug, Args)]
@@ -109,6 +141,9 @@ pub struct SimulateArgs {
     /// Seconds before a launched MPI run is killed with all its ranks.
     #[arg(long, env = "COLLIDE_MPI_TIMEOUT", default_value_t = 3600.0, value_parser = parse_seconds)]
     pub mpi_timeout: f64,
+    /// Add this fraction of extra work to every step (testing `collide check` only).
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.0, value_parser = parse_fraction, hide = true)]
+    pub inject_slowdown: f64,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -193,6 +228,15 @@ fn parse_seconds(text: &str) -> Result<f64, String> {
         Ok(seconds) if seconds > 0.0 && seconds.is_finite() => Ok(seconds),
         _ => Err(format!(
             "expected a positive number of seconds, got \"{text}\""
+        )),
+    }
+}
+
+fn parse_fraction(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(fraction) if fraction >= 0.0 && fraction.is_finite() => Ok(fraction),
+        _ => Err(format!(
+            "expected a fraction of 0 or more (0.25 = 25%), got \"{text}\""
         )),
     }
 }

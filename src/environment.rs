@@ -6,7 +6,7 @@ use std::process::Command;
 use crate::backend::machine_cores;
 
 /// Facts recorded beside every measurement of a study.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Environment {
     pub hostname: String,
     pub cpu_model: String,

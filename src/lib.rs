@@ -6,6 +6,8 @@
 pub mod analysis;
 pub mod app;
 pub mod backend;
+pub mod calibrate;
+pub mod check;
 pub mod cli;
 pub mod environment;
 pub mod figures;
@@ -20,4 +22,5 @@ pub mod runner;
 pub mod scene_file;
 pub mod sim;
 pub mod spec;
+pub mod stats;
 pub mod summary;

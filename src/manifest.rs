@@ -190,6 +190,17 @@ struct RawBackends {
     mpi: Vec<i64>,
 }
 
+/// Reads and validates the manifest at `path`: the study, and the text it came from.
+pub fn load(path: &Path) -> anyhow::Result<(Study, String)> {
+    let text = std::fs::read_to_string(path).map_err(|err| {
+        anyhow::anyhow!(
+            "cannot read manifest {}: {err}; check the path",
+            path.display()
+        )
+    })?;
+    Ok((parse(path, &text)?, text))
+}
+
 /// Validates manifest text; scene files are found relative to `path`'s folder.
 pub fn parse(path: &Path, text: &str) -> Result<Study, ManifestError> {
     let at = |offset: usize| format!("{}:{}", path.display(), line_of(text, offset));

@@ -46,6 +46,7 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     (2, "mean_overlap", Fill::F64(f64::NAN)),
     (2, "energy_relative_error", Fill::F64(f64::NAN)),
     (2, "collapse_guard_fired", Fill::NullU64),
+    (2, "cpu_s", Fill::F64(f64::NAN)),
 ];
 
 /// What became of one run.
@@ -82,6 +83,8 @@ pub struct Record {
     pub boundary: String,
     pub broadphase: String,
     pub wall_s: f64,
+    /// CPU seconds of the stepping loop, summed over threads and ranks (NaN: unknown).
+    pub cpu_s: f64,
     pub setup_s: f64,
     pub fps: f64,
     pub particle_steps_per_s: f64,
@@ -169,6 +172,7 @@ impl Record {
         record.boundary = summary.boundary.clone();
         record.broadphase = summary.broadphase.clone();
         record.wall_s = summary.wall_s;
+        record.cpu_s = summary.cpu_s.unwrap_or(f64::NAN);
         record.setup_s = summary.setup_s;
         record.fps = summary.fps;
         record.particle_steps_per_s = summary.particle_steps_per_s;
@@ -236,6 +240,7 @@ impl Record {
             boundary: String::new(),
             broadphase: String::new(),
             wall_s: f64::NAN,
+            cpu_s: f64::NAN,
             setup_s: f64::NAN,
             fps: f64::NAN,
             particle_steps_per_s: f64::NAN,
@@ -363,7 +368,7 @@ macro_rules! for_each_column {
             u64: threads, ranks, workers, n, steps, pair_collisions, wall_collisions,
                  logical_cores, physical_cores, memory_bytes;
             u32: repetition;
-            f64: dt, packing, wall_s, setup_s, fps, particle_steps_per_s, integration_s,
+            f64: dt, packing, wall_s, cpu_s, setup_s, fps, particle_steps_per_s, integration_s,
                  broad_phase_s, collision_s, communication_s, kinetic_energy_initial,
                  kinetic_energy_final, momentum_initial_x, momentum_initial_y,
                  momentum_final_x, momentum_final_y, max_overlap, load_average_start,

@@ -29,6 +29,11 @@ pub struct RunOptions {
     pub resume: bool,
     /// No progress bar or notes (also when stdout is not a terminal).
     pub quiet: bool,
+    /// Extra `collide simulate` arguments for every run (e.g. `--inject-slowdown`).
+    pub simulate_args: Vec<String>,
+    /// Time the calibration workload (`collide calibrate`) before every round of
+    /// repetitions, interleaved with the configurations.
+    pub calibrate: bool,
 }
 
 /// What a study run left behind.
@@ -39,6 +44,8 @@ pub struct StudyOutcome {
     pub failed: usize,
     /// Runs already in the file when resuming.
     pub kept: usize,
+    /// Each calibration run, in order (empty unless asked for).
+    pub calibrations: Vec<Calibration>,
 }
 
 pub fn run_study(
@@ -62,10 +69,7 @@ pub fn run_study(
             dir.display()
         )
     })?;
-    let manifest_hash = format!(
-        "{:016x}",
-        xxhash_rust::xxh3::xxh3_64(manifest_text.as_bytes())
-    );
+    let manifest_hash = manifest_hash(manifest_text);
     let build_id = format!(
         "{}{}-{}-[{}]",
         environment.git_commit,
@@ -151,8 +155,23 @@ pub fn run_study(
         command
             .arg("simulate")
             .arg(scene)
-            .args(configuration.simulate_args());
+            .args(configuration.simulate_args())
+            .args(&options.simulate_args);
         run_with_timeout(command, study.timeout)
+    };
+    let mut calibrations = Vec::new();
+    let mut calibrate = || -> anyhow::Result<()> {
+        let mut command = Command::new(&exe);
+        command.arg("calibrate");
+        match run_with_timeout(command, study.timeout)? {
+            Ended::Exited { status, stdout, .. } if status.success() => {
+                let calibration = serde_json::from_str(stdout.trim())
+                    .context("`collide calibrate` printed no calibration time")?;
+                calibrations.push(calibration);
+                Ok(())
+            }
+            _ => bail!("the calibration workload (`collide calibrate`) failed"),
+        }
     };
     for &c in &warm {
         for _ in 0..study.warmups {
@@ -163,7 +182,11 @@ pub fn run_study(
         }
     }
     let (mut measured, mut failed) = (0, 0);
-    for &(rep, c) in &todo {
+    for (index, &(rep, c)) in todo.iter().enumerate() {
+        if options.calibrate && (index == 0 || todo[index - 1].0 != rep) {
+            progress.set_message(format!("rep {rep}: calibration"));
+            calibrate()?;
+        }
         let configuration = configurations[c];
         let key = configuration.key();
         progress.set_message(format!("rep {rep}: {key}"));
@@ -231,7 +254,26 @@ pub fn run_study(
         measured,
         failed,
         kept,
+        calibrations,
     })
+}
+
+/// What `collide calibrate` prints: one JSON object, the times of
+/// [`crate::calibrate::workload_seconds`].
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+pub struct Calibration {
+    /// Wall seconds.
+    pub calibration_s: f64,
+    /// CPU seconds; null where unknown.
+    pub calibration_cpu_s: Option<f64>,
+}
+
+/// xxh3 of a manifest's text, as recorded in `manifest_hash`.
+pub fn manifest_hash(manifest_text: &str) -> String {
+    format!(
+        "{:016x}",
+        xxhash_rust::xxh3::xxh3_64(manifest_text.as_bytes())
+    )
 }
 
 /// `<dir>/<UTC timestamp>-<host>-<commit>.parquet`.
@@ -274,7 +316,7 @@ fn resumable(
 
 /// The scene file each configuration's process reads: its own file, or its inline scene
 /// written to `<dir>/scenes/<scene>.toml` (kept beside the results it produced).
-fn materialize_scenes(
+pub fn materialize_scenes(
     dir: &Path,
     configurations: &[&Configuration],
 ) -> anyhow::Result<Vec<PathBuf>> {

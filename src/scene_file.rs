@@ -16,7 +16,8 @@ use crate::sim::scene::{
 };
 use crate::sim::{Boundary, Broadphase, Disk, Domain, Particles, Physics, Scene};
 use crate::spec::{
-    DEFAULT_DT_FRACTION, DtChoice, Method, MethodSpec, Observe, RunSpec, SceneSource,
+    DEFAULT_DT_FRACTION, DtChoice, InjectedSlowdown, Method, MethodSpec, Observe, RunSpec,
+    SceneSource,
 };
 
 /// Values given on the command line that replace the scene file's.
@@ -91,7 +92,11 @@ pub fn parse(path: &Path, text: &str, overrides: &Overrides) -> Result<RunSpec, 
         SceneSource::Gas(validator.gas(&raw.scene, overrides)?)
     };
     validator.method_fits_scene(&raw, &method, &scene)?;
-    Ok(RunSpec { scene, method })
+    Ok(RunSpec {
+        scene,
+        method,
+        slowdown: InjectedSlowdown::NONE,
+    })
 }
 
 #[derive(Deserialize)]

@@ -89,6 +89,29 @@ impl MethodSpec {
 pub struct RunSpec {
     pub scene: SceneSource,
     pub method: MethodSpec,
+    /// Extra work added to every step, to test `collide check` against a known
+    /// slowdown; [`InjectedSlowdown::NONE`] in every real run.
+    pub slowdown: InjectedSlowdown,
+}
+
+/// Busy work added after every step, as a fraction of that step's own wall time (0.25:
+/// each step takes 25% longer). It changes timings only, never the disks.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct InjectedSlowdown {
+    fraction: f64,
+}
+
+impl InjectedSlowdown {
+    pub const NONE: InjectedSlowdown = InjectedSlowdown { fraction: 0.0 };
+
+    /// A slowdown of `fraction` (finite, 0 or more), or `None`.
+    pub fn new(fraction: f64) -> Option<InjectedSlowdown> {
+        (fraction.is_finite() && fraction >= 0.0).then_some(InjectedSlowdown { fraction })
+    }
+
+    pub fn fraction(self) -> f64 {
+        self.fraction
+    }
 }
 
 /// A run ready to step: the initial state and the resolved method.

@@ -33,6 +33,10 @@ pub struct RunSummary {
     pub seed: Option<u64>,
     /// Seconds in the stepping loop only.
     pub wall_s: f64,
+    /// CPU seconds of the stepping loop, summed over threads and ranks (time spent
+    /// waiting for a CPU is not counted); null where unknown.
+    #[serde(default)]
+    pub cpu_s: Option<f64>,
     /// Seconds to build the initial state and scratch memory.
     pub setup_s: f64,
     /// Steps per second of `wall_s`.

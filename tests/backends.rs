@@ -5,7 +5,7 @@ use std::num::NonZeroUsize;
 use collide::backend::{serial, threads};
 use collide::sim::scene::{GasSpec, MassRule, RadiusDistribution};
 use collide::sim::{Boundary, Broadphase, Physics};
-use collide::spec::{MethodSpec, RunSpec, SceneSource};
+use collide::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
 
 /// Dilute and dense, walls and periodic, elastic and inelastic: the cases the issue names.
 fn scenes() -> Vec<(String, RunSpec)> {
@@ -33,6 +33,7 @@ fn run_spec(gas: GasSpec, broadphase: Broadphase) -> RunSpec {
     RunSpec {
         scene: SceneSource::Gas(gas),
         method: MethodSpec::stepped(0.05, 300, broadphase),
+        slowdown: InjectedSlowdown::NONE,
     }
 }
 

@@ -3,7 +3,7 @@
 use collide::backend::serial;
 use collide::sim::scene::{GasSpec, Placement};
 use collide::sim::{Boundary, Broadphase, Physics, Stepper};
-use collide::spec::{MethodSpec, RunSpec, SceneSource};
+use collide::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
 use collide::summary::RunSummary;
 
 fn gas(
@@ -25,6 +25,7 @@ fn spec(gas: GasSpec, dt: f64, steps: u64, broadphase: Broadphase) -> RunSpec {
     RunSpec {
         scene: SceneSource::Gas(gas),
         method: MethodSpec::stepped(dt, steps, broadphase),
+        slowdown: InjectedSlowdown::NONE,
     }
 }
 

@@ -41,6 +41,7 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         packing: 0.05,
         seed: Some(12345),
         wall_s,
+        cpu_s: None,
         setup_s: 0.001,
         fps: 400.0 / wall_s,
         particle_steps_per_s: (n * 400) as f64 / wall_s,

@@ -2,6 +2,7 @@
 
 mod accuracy;
 mod backends;
+mod check;
 mod cli;
 #[cfg(feature = "mpi")]
 mod mpi;

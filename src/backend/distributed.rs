@@ -18,7 +18,8 @@ use std::time::Instant;
 
 use crate::backend::comm::Communicator;
 use crate::backend::{
-    Accuracy, BackendError, Measured, RunOutcome, StageSeconds, Workers, summarize, timed,
+    Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
+    summarize, timed,
 };
 use crate::sim::collision::{PairSide, collide_pair};
 use crate::sim::grid::{Contact, Entry, StripGrid, StripLayout, receive_band, refresh_band};
@@ -47,11 +48,9 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     let mut rank = RankState::new(comm, &prepared.scene, layout, &slabs);
     let setup_s = setup_start.elapsed().as_secs_f64();
 
-    let loop_start = Instant::now();
-    for _ in 0..prepared.steps {
-        rank.step(comm, prepared.params.dt);
-    }
-    let wall_s = loop_start.elapsed().as_secs_f64();
+    let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, |_| {
+        rank.step(comm, prepared.params.dt)
+    });
 
     // Collective reductions: the whole state and the counters, on every rank.
     let mut mine = Vec::with_capacity(rank.particles.len() * PACKED_LEN);
@@ -65,13 +64,14 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         c.pair_collisions as f64,
         c.wall_collisions as f64,
         c.max_overlap,
-        wall_s,
+        seconds.wall,
         s.integration,
         s.broad_phase,
         s.collisions,
         s.communication,
         c.overlap_sum,
         c.virial,
+        seconds.cpu.unwrap_or(f64::NAN),
     ];
     let all_figures = comm.all_gather(&figures);
     if comm.rank() != 0 {
@@ -84,6 +84,8 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     let mut counters = rank.shared_counters;
     let mut stages = StageSeconds::default();
     let mut slowest_wall_s = 0.0_f64;
+    // Summed in rank order: the same total on every run of the same measurements.
+    let mut cpu_s = 0.0_f64;
     for f in &all_figures {
         counters.merge(&StepCounters {
             pair_collisions: f[0] as u64,
@@ -98,10 +100,12 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         stages.broad_phase = stages.broad_phase.max(f[5]);
         stages.collisions = stages.collisions.max(f[6]);
         stages.communication = stages.communication.max(f[7]);
+        cpu_s += f[10];
     }
     let measured = Measured {
         setup_s,
         wall_s: slowest_wall_s,
+        cpu_s: Some(cpu_s).filter(|s| s.is_finite()),
         stages,
         counters,
         initial: observe(&scene.particles),
@@ -471,7 +475,7 @@ mod tests {
     use crate::backend::serial;
     use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution};
     use crate::sim::{Broadphase, Physics};
-    use crate::spec::{MethodSpec, SceneSource};
+    use crate::spec::{InjectedSlowdown, MethodSpec, SceneSource};
 
     fn spec(boundary: Boundary, restitution: f64, packing: f64) -> RunSpec {
         RunSpec {
@@ -484,6 +488,7 @@ mod tests {
                 ..GasSpec::unit(2000, packing)
             }),
             method: MethodSpec::stepped(0.05, 300, Broadphase::Grid),
+            slowdown: InjectedSlowdown::NONE,
         }
     }
 

@@ -18,7 +18,7 @@ use std::time::Instant;
 use crate::sim::observe::{Observables, observe, state_hash};
 use crate::sim::scene::PlacementError;
 use crate::sim::{Particles, StepCounters};
-use crate::spec::{Method, PreparedRun};
+use crate::spec::{InjectedSlowdown, Method, PreparedRun};
 use crate::summary::RunSummary;
 
 /// Which backend runs the steps, with its worker count.
@@ -88,6 +88,95 @@ pub fn timed<T>(seconds: &mut f64, work: impl FnOnce() -> T) -> T {
     result
 }
 
+/// Whose CPU time a backend's stepping loop counts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CpuScope {
+    /// The calling thread (serial; one rank, whose ranks' times are then summed).
+    Thread,
+    /// Every thread of this process (the rayon pool).
+    Process,
+}
+
+/// CPU seconds run so far by this thread or process (`clock_gettime`'s CPU-time clocks,
+/// exact to the nanosecond; time spent waiting for a CPU is not counted). `None` where
+/// the system does not provide them.
+pub fn cpu_seconds(scope: CpuScope) -> Option<f64> {
+    let clock = match scope {
+        CpuScope::Thread => libc::CLOCK_THREAD_CPUTIME_ID,
+        CpuScope::Process => libc::CLOCK_PROCESS_CPUTIME_ID,
+    };
+    let mut now = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `now` is a valid, writable timespec for the duration of the call.
+    let status = unsafe { libc::clock_gettime(clock, &mut now) };
+    (status == 0).then_some(now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9)
+}
+
+/// Wall and CPU seconds of a stepping loop.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoopSeconds {
+    pub wall: f64,
+    /// CPU seconds of the threads in `scope` (`None` where unknown).
+    pub cpu: Option<f64>,
+}
+
+/// The stepping loop every backend times: `step(1)` to `step(steps)`, each followed by
+/// the injected extra work (none in real runs).
+///
+/// The extra work is integer arithmetic on the calling thread, counted on the clock that
+/// `collide check` compares: after each step it runs until the CPU seconds of `scope`
+/// have grown by `fraction` of what the step itself took (wall seconds where CPU time is
+/// unknown). A fraction of 0.1 therefore makes the loop's CPU time 10% larger whatever
+/// else runs on the machine; what one step overshoots, the next one owes less.
+pub fn step_loop(
+    steps: u64,
+    slowdown: InjectedSlowdown,
+    scope: CpuScope,
+    mut step: impl FnMut(u64),
+) -> LoopSeconds {
+    let fraction = slowdown.fraction();
+    let cpu_start = cpu_seconds(scope);
+    let loop_start = Instant::now();
+    if fraction > 0.0 {
+        let clock = || cpu_seconds(scope).unwrap_or_else(|| loop_start.elapsed().as_secs_f64());
+        let mut owed = 0.0;
+        for number in 1..=steps {
+            let before = clock();
+            step(number);
+            let mut now = clock();
+            owed += fraction * (now - before);
+            while owed > 0.0 {
+                busy_rounds(BUSY_ROUNDS);
+                let later = clock();
+                owed -= later - now;
+                now = later;
+            }
+        }
+    } else {
+        for number in 1..=steps {
+            step(number);
+        }
+    }
+    let wall = loop_start.elapsed().as_secs_f64();
+    let cpu = cpu_seconds(scope)
+        .zip(cpu_start)
+        .map(|(end, start)| end - start);
+    LoopSeconds { wall, cpu }
+}
+
+/// Rounds of injected work between two looks at the clock (a few microseconds).
+const BUSY_ROUNDS: u64 = 2000;
+
+/// Integer work that touches no memory of the simulation.
+fn busy_rounds(rounds: u64) {
+    let mut x = 1_u64;
+    for _ in 0..rounds {
+        x = std::hint::black_box(x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1));
+    }
+}
+
 /// Where a run's workers went: the backend's name and its threads and ranks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Workers {
@@ -123,6 +212,8 @@ fn count_cpu_list(list: &str) -> Option<usize> {
 pub struct Measured {
     pub setup_s: f64,
     pub wall_s: f64,
+    /// CPU seconds of the stepping loop, summed over threads and ranks.
+    pub cpu_s: Option<f64>,
     pub stages: StageSeconds,
     pub counters: StepCounters,
     pub initial: Observables,
@@ -205,6 +296,7 @@ pub fn summarize(
         packing: prepared.scene.packing(),
         seed: prepared.seed,
         wall_s,
+        cpu_s: measured.cpu_s,
         setup_s: measured.setup_s,
         fps: steps as f64 / wall_s,
         particle_steps_per_s: (n as f64 * steps as f64) / wall_s,

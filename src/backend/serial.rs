@@ -4,8 +4,8 @@
 use std::time::Instant;
 
 use crate::backend::{
-    Accuracy, BackendError, Measured, RunOutcome, StageSeconds, Workers, is_curve_sample,
-    summarize, timed,
+    Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers,
+    is_curve_sample, step_loop, summarize, timed,
 };
 use crate::sim::Particles;
 use crate::sim::Stepper;
@@ -23,15 +23,14 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
     let initial = observe(&particles);
     let mut curve = Curve::new(&particles);
     let mut stages = StageSeconds::default();
-    let (setup_s, loop_s, counters, mut accuracy) = match prepared.method {
+    let (setup_s, seconds, counters, mut accuracy) = match prepared.method {
         Method::Step => {
             let mut stepper = Stepper::for_scene(&prepared.scene, prepared.params);
             let setup_s = setup_start.elapsed().as_secs_f64();
             let mut missed =
                 (prepared.observe == Observe::Accuracy).then(MissedCollisions::default);
             let (domain, dt) = (prepared.scene.domain, prepared.params.dt);
-            let loop_start = Instant::now();
-            for step in 1..=prepared.steps {
+            let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, |step| {
                 if let Some(missed) = missed.as_mut() {
                     timed(&mut curve.seconds, || {
                         missed.before_step(&particles, &domain, dt)
@@ -54,39 +53,39 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
                     }
                 }
                 curve.sample(&prepared, step, &particles);
-            }
+            });
             let accuracy = Accuracy {
                 missed_collisions: missed.map(|m| m.missed),
                 ..Accuracy::default()
             };
-            let loop_s = loop_start.elapsed().as_secs_f64();
-            (setup_s, loop_s, stepper.counters(), accuracy)
+            (setup_s, seconds, stepper.counters(), accuracy)
         }
         Method::Event => {
             let scene = &prepared.scene;
             let mut sim = EventSim::new(scene.domain, scene.physics, prepared.event, &particles);
             let setup_s = setup_start.elapsed().as_secs_f64();
-            let loop_start = Instant::now();
-            for step in 1..=prepared.steps {
+            let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, |step| {
                 // The time of interval k is k·dt, not a running sum.
                 timed(&mut stages.collisions, || {
                     sim.advance_to(&mut particles, step as f64 * prepared.params.dt)
                 });
                 curve.sample(&prepared, step, &particles);
-            }
+            });
             let accuracy = Accuracy {
                 collapse_guard: Some((sim.collapse_guard_fired(), prepared.event.tc)),
                 ..Accuracy::default()
             };
-            let loop_s = loop_start.elapsed().as_secs_f64();
-            (setup_s, loop_s, sim.counters(), accuracy)
+            (setup_s, seconds, sim.counters(), accuracy)
         }
     };
-    let wall_s = loop_s - curve.seconds;
+    // Observing is single-threaded work inside the loop: out of both clocks.
+    let wall_s = seconds.wall - curve.seconds;
+    let cpu_s = seconds.cpu.map(|cpu| cpu - curve.seconds);
     accuracy.temperature_curve = Some(curve.points);
     let measured = Measured {
         setup_s,
         wall_s,
+        cpu_s,
         stages,
         counters,
         initial,

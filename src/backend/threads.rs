@@ -16,7 +16,8 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::backend::{
-    Accuracy, BackendError, Measured, RunOutcome, StageSeconds, Workers, summarize, timed,
+    Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
+    summarize, timed,
 };
 use crate::sim::collision::{PairSide, collide_pair};
 use crate::sim::grid::{
@@ -58,17 +59,16 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
     let setup_s = setup_start.elapsed().as_secs_f64();
     let initial = observe(&particles);
 
-    let loop_start = Instant::now();
-    pool.install(|| {
-        for _ in 0..prepared.steps {
-            stepper.step(&mut particles);
-        }
+    let seconds = pool.install(|| {
+        step_loop(prepared.steps, spec.slowdown, CpuScope::Process, |_| {
+            stepper.step(&mut particles)
+        })
     });
-    let wall_s = loop_start.elapsed().as_secs_f64();
 
     let measured = Measured {
         setup_s,
-        wall_s,
+        wall_s: seconds.wall,
+        cpu_s: seconds.cpu,
         stages: stepper.stages,
         counters: stepper.counters,
         initial,
