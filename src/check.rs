@@ -56,6 +56,8 @@ const CONFIDENCE: f64 = 0.95;
 /// An instruction count counts as changed beyond this fraction (callgrind is exact for
 /// one binary and input; this absorbs start-up differences such as the environment).
 const INSTRUCTION_NOISE: f64 = 0.01;
+/// The unit of the instruction-count row.
+const INSTRUCTIONS: &str = "instructions";
 /// The instruction workload: the manifest's first serial configuration, this small.
 const INSTRUCTION_DISKS: i64 = 2000;
 const INSTRUCTION_STEPS: i64 = 50;
@@ -73,6 +75,30 @@ pub struct BaselineInfo {
     pub calibrations: Vec<Calibration>,
     pub instructions: Option<InstructionCount>,
     pub environment: Environment,
+    /// The kernel's boot id (`/proc/sys/kernel/random/boot_id`) when it was recorded:
+    /// timing verdicts decide only on the machine, and boot, the baseline came from.
+    #[serde(default)]
+    pub boot_id: String,
+}
+
+/// The running kernel's boot id; empty where the system does not say.
+fn boot_id() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/random/boot_id")
+        .map(|id| id.trim().to_owned())
+        .unwrap_or_default()
+}
+
+/// Whether timing verdicts decide the outcome: only against a baseline recorded on this
+/// very machine since its last boot. Across machines (and VM instances, and reboots) the
+/// calibration leaves the simulator's normalised time off by up to about 20% (README),
+/// beyond any useful noise threshold; instruction counts do not move and always decide.
+fn timings_decide(baseline_boot: &str, this_boot: &str) -> bool {
+    !this_boot.is_empty() && baseline_boot == this_boot
+}
+
+/// Whether a compared row's verdict decides the check's outcome.
+fn decides(row: &Row, timings_decide: bool) -> bool {
+    row.unit == INSTRUCTIONS || timings_decide
 }
 
 /// Instructions executed by one serial run under callgrind.
@@ -156,6 +182,7 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
         calibrations: outcome.calibrations,
         instructions,
         environment,
+        boot_id: boot_id(),
     };
     match baseline {
         None => {
@@ -170,13 +197,17 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
         }
         Some((old_info, old_rows)) => {
             let compared = compare(&old_info, &old_rows, &info, &rows, options.noise)?;
-            let text = summary(options, &old_info, &info, &compared);
+            let timings_decide = timings_decide(&old_info.boot_id, &info.boot_id);
+            let text = summary(options, &old_info, &info, &compared, timings_decide);
             print!("{text}");
             let path = options.out.join("summary.md");
             write_atomically(&path, |out| out.write_all(text.as_bytes()))?;
             println!("summary written to {}", path.display());
             Ok(
-                match compared.iter().any(|row| row.verdict == Verdict::Regressed) {
+                match compared
+                    .iter()
+                    .any(|row| row.verdict == Verdict::Regressed && decides(row, timings_decide))
+                {
                     true => CheckOutcome::Regressed,
                     false => CheckOutcome::Passed,
                 },
@@ -381,7 +412,7 @@ fn compare(
             };
             rows.push(Row {
                 what: "serial instructions (callgrind)".to_owned(),
-                unit: "instructions",
+                unit: INSTRUCTIONS,
                 old: old.instructions as f64,
                 new: new.instructions as f64,
                 ratio: exact,
@@ -447,10 +478,15 @@ fn summary(
     old_info: &BaselineInfo,
     new_info: &BaselineInfo,
     rows: &[Row],
+    timings_decide: bool,
 ) -> String {
     let regressed = rows
         .iter()
-        .filter(|r| r.verdict == Verdict::Regressed)
+        .filter(|r| r.verdict == Verdict::Regressed && decides(r, timings_decide))
+        .count();
+    let advisory = rows
+        .iter()
+        .filter(|r| r.verdict == Verdict::Regressed && !decides(r, timings_decide))
         .count();
     let improved = rows
         .iter()
@@ -460,9 +496,10 @@ fn summary(
     let _ = writeln!(
         out,
         "# collide check: {}\n",
-        match regressed {
-            0 => "no regression".to_owned(),
-            n => format!("{n} REGRESSED"),
+        match (regressed, advisory) {
+            (0, 0) => "no regression".to_owned(),
+            (0, n) => format!("no regression ({n} timing regression(s) reported, not judged)"),
+            (n, _) => format!("{n} REGRESSED"),
         }
     );
     let describe = |info: &BaselineInfo| {
@@ -522,6 +559,22 @@ fn summary(
     );
     let _ = writeln!(
         out,
+        "- {}\n",
+        match timings_decide {
+            true => "timing verdicts decide: the baseline was recorded on this machine since \
+                     its last boot"
+                .to_owned(),
+            false => format!(
+                "timing verdicts are shown, not judged: the baseline was recorded on another \
+                 machine or boot ({}), where the normalised times of the same build differ by \
+                 up to about 20%; the instruction count (callgrind, the same on any machine) \
+                 decides. Record a baseline here (`--update-baseline`) to judge timings",
+                old_info.environment.cpu_model
+            ),
+        }
+    );
+    let _ = writeln!(
+        out,
         "| configuration | measure | baseline median | median now | ratio | {:.0}% interval | verdict | wall ratio (interval) | note |",
         100.0 * CONFIDENCE
     );
@@ -530,7 +583,7 @@ fn summary(
         "| --- | --- | ---: | ---: | ---: | --- | --- | --- | --- |"
     );
     for row in rows {
-        let digits = if row.unit == "instructions" { 0 } else { 4 };
+        let digits = if row.unit == INSTRUCTIONS { 0 } else { 4 };
         let _ = writeln!(
             out,
             "| {} | {} | {:.digits$} | {:.digits$} | {:.3} | {:.3}–{:.3} | {} | {} | {} |",
@@ -560,8 +613,26 @@ fn summary(
     }
     let _ = writeln!(
         out,
-        "\nverdict: {regressed} regressed, {improved} improved, {} unchanged",
-        rows.len() - regressed - improved
+        "\nverdict: {regressed} regressed, {improved} improved, {} unchanged{}",
+        rows.len() - regressed - improved - advisory,
+        match advisory {
+            0 => String::new(),
+            n => format!(", {n} timing regression(s) not judged (another machine)"),
+        }
     );
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn timings_decide_only_on_the_boot_the_baseline_was_recorded_on() {
+        assert!(timings_decide("boot-a", "boot-a"));
+        assert!(!timings_decide("boot-a", "boot-b"));
+        // Baselines from before boot ids were kept, and systems that do not tell.
+        assert!(!timings_decide("", "boot-b"));
+        assert!(!timings_decide("", ""));
+    }
 }

@@ -4,8 +4,8 @@
 use std::time::Instant;
 
 use crate::backend::{
-    Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers,
-    is_curve_sample, step_loop, summarize, timed,
+    Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, is_curve_sample,
+    step_loop, summarize, timed,
 };
 use crate::sim::Particles;
 use crate::sim::Stepper;
