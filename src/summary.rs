@@ -149,10 +149,14 @@ impl fmt::Display for RunSummary {
         } else {
             ""
         };
+        let search = match self.method.as_str() {
+            "event" => "exact event times (no broad phase)".to_owned(),
+            _ => format!("{} broad phase", self.broadphase),
+        };
         writeln!(
             f,
-            "{} steps of dt = {:.6e}{dt_rule}, {} broad phase",
-            self.steps, self.dt, self.broadphase
+            "{} steps of dt = {:.6e}{dt_rule}, {search}",
+            self.steps, self.dt
         )?;
         writeln!(
             f,
