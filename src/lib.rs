@@ -3,6 +3,7 @@
 //!
 //! Arrows point one way: `app` → `backend` → `sim`. `sim` is pure.
 
+pub mod accuracy;
 pub mod analysis;
 pub mod app;
 pub mod backend;
