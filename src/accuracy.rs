@@ -154,9 +154,9 @@ pub fn pareto_front(points: &[(f64, f64)]) -> Vec<bool> {
         .map(|&(speed, error)| {
             !speed.is_nan()
                 && !error.is_nan()
-                && !points.iter().any(|&(s, e)| {
-                    s >= speed && e <= error && (s > speed || e < error)
-                })
+                && !points
+                    .iter()
+                    .any(|&(s, e)| s >= speed && e <= error && (s > speed || e < error))
         })
         .collect()
 }

@@ -144,6 +144,7 @@ fn markdown(records: &[Record]) -> String {
     let pictures = report::Pictures {
         figures,
         scene: Some("scene.png".into()),
+        accuracy: None,
     };
     report::markdown(records, &setups, "results/synthetic/", &pictures)
 }
