@@ -82,7 +82,7 @@ fn draw_pareto(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
             .label_style((FONT, 14))
             .light_line_style(BLACK.mix(0.04))
             .x_label_formatter(&|x| format!("{x:.0e}"))
-            .y_label_formatter(&|y| format!("{y:.3}"))
+            .y_label_formatter(&|y| format!("{y:.0}"))
             .draw()
             .map_err(|e| anyhow!("{e}"))?;
         for (index, group) in groups.iter().enumerate() {
@@ -119,7 +119,9 @@ fn draw_pareto(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
                         5,
                         colour.stroke_width(1),
                     ))
-                    .map_err(|e| anyhow!("{e}"))?;
+                    .map_err(|e| anyhow!("{e}"))?
+                    .label(format!("event, packing {:.2} (error 0)", group.packing))
+                    .legend(move |(x, y)| TriangleMarker::new((x + 10, y), 6, colour.filled()));
                 chart
                     .draw_series([TriangleMarker::new(
                         (ERROR_FLOOR, speed),
@@ -143,7 +145,7 @@ fn draw_pareto(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
         }
         chart
             .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
+            .position(SeriesLabelPosition::LowerRight)
             .label_font((FONT, 14))
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
@@ -196,7 +198,11 @@ fn draw_stability(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
         .margin(16)
         .x_label_area_size(50)
         .y_label_area_size(80)
-        .build_cartesian_2d((0..nx).into_segmented(), (0..ny).into_segmented())
+        .build_cartesian_2d(
+            // An integer range is inclusive once segmented: 0..n − 1 gives n cells.
+            (0..nx - 1).into_segmented(),
+            (0..ny - 1).into_segmented(),
+        )
         .map_err(|e| anyhow!("{e}"))?;
     let index = |value: &SegmentValue<usize>| match value {
         SegmentValue::CenterOf(i) => Some(*i),
@@ -246,7 +252,11 @@ fn draw_stability(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
                 TextStyle::from((FONT, 15).into_font()).pos(Pos::new(HPos::Center, VPos::Center));
             let label = EmptyElement::at((CenterOf(i), CenterOf(j)))
                 + Text::new(
-                    format!("m {:.1e}", point.missed_fraction),
+                    if point.missed_fraction == 0.0 {
+                        "m 0".to_owned()
+                    } else {
+                        format!("m {:.1e}", point.missed_fraction)
+                    },
                     (0, -10),
                     style.clone(),
                 )

@@ -46,7 +46,14 @@ pub fn markdown(records: &[Record], setups: &[Setup], source: &str, pictures: &P
     let Some(first) = records.first() else {
         return "# Empty study\n\nNo records.\n".to_owned();
     };
-    let _ = writeln!(out, "# Scaling report: study `{}`\n", first.study);
+    // A study of one backend at one worker count per setup (an accuracy study) has no
+    // scaling to report: its timings are in the accuracy tables.
+    let scales = setups
+        .iter()
+        .any(|s| s.backends.iter().map(|b| b.points.len()).sum::<usize>() > 1);
+    let accuracy_only = pictures.accuracy.is_some() && !scales;
+    let kind = if accuracy_only { "Accuracy" } else { "Scaling" };
+    let _ = writeln!(out, "# {kind} report: study `{}`\n", first.study);
     let _ = writeln!(
         out,
         "Regenerate with `collide run experiments/{}.toml`, then `collide report {source}`.\n",
@@ -66,6 +73,9 @@ pub fn markdown(records: &[Record], setups: &[Setup], source: &str, pictures: &P
     warnings(&mut out, records, setups);
     if let Some(section) = &pictures.accuracy {
         accuracy_section(&mut out, section);
+    }
+    if accuracy_only {
+        return out;
     }
     for (index, setup) in setups.iter().enumerate() {
         setup_section(&mut out, setup);
@@ -467,7 +477,19 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
                 cell(p.rate_error, format!("{:+.2}%", 100.0 * p.rate_error)),
             );
         };
-        for point in group.reference.iter().chain(&group.steps) {
+        if let Some(reference) = &group.reference {
+            let _ = writeln!(
+                out,
+                "| event | exact | — | {:.4} | {:.1} | {:.3e} | 0 | {:.1e} | {:.4} | reference | {:.4} | reference |",
+                reference.wall_s,
+                reference.sim_time_per_s,
+                reference.particle_steps_per_s,
+                reference.max_overlap,
+                reference.compressibility_z,
+                reference.collision_rate,
+            );
+        }
+        for point in &group.steps {
             row(out, point);
         }
         let _ = writeln!(out);
