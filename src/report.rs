@@ -455,7 +455,10 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
             "| method | dt | v_rms·dt/r | wall s | sim time / s | particle-steps/s | missed fraction | max overlap | Z | Z error | ω | ω error |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
         );
         let row = |out: &mut String, p: &AccuracyPoint| {
-            let missed = cell(p.missed_fraction, format!("{:.2e}", p.missed_fraction));
+            let missed = match p.missed_fraction {
+                0.0 => "0".to_owned(),
+                m => cell(m, format!("{m:.2e}")),
+            };
             let missed = if p.failed() {
                 format!("**{missed}**")
             } else {
