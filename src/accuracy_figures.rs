@@ -9,13 +9,15 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::accuracy::{AccuracyPoint, FAILURE_MISSED_FRACTION, PackingGroup, pareto_front};
-use crate::figures::{FONT, PALETTE, register_font};
+use crate::figures::{FONT, PALETTE, draw_legend, register_font};
 
 /// File names of the two figures.
 pub const PARETO_FILE: &str = "accuracy-pareto.png";
 pub const STABILITY_FILE: &str = "accuracy-stability.png";
 const PARETO_SIZE: (u32, u32) = (1400, 600);
 const STABILITY_SIZE: (u32, u32) = (1100, 560);
+/// Which error a panel plots.
+type ErrorOf = fn(&AccuracyPoint) -> f64;
 /// Errors of exactly 0 are drawn at this floor of the log axis.
 const ERROR_FLOOR: f64 = 1e-5;
 
@@ -44,7 +46,7 @@ fn draw_pareto(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
         )
         .map_err(|e| anyhow!("{e}"))?;
     let panels = root.split_evenly((1, 2));
-    let errors: [(&str, fn(&AccuracyPoint) -> f64); 2] = [
+    let errors: [(&str, ErrorOf); 2] = [
         ("missed-collision fraction", |p| p.missed_fraction),
         ("|Z error| against the event reference", |p| p.z_error),
     ];
@@ -145,17 +147,9 @@ fn draw_pareto(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
         }
         // One legend, on the left panel, whose lower right stays clear of the data
         // (accurate steps are slow, fast steps inaccurate).
-        if panel_index > 0 {
-            continue;
+        if panel_index == 0 {
+            draw_legend(&mut chart, SeriesLabelPosition::LowerRight, 14)?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .label_font((FONT, 14))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| anyhow!("{e}"))?;
     }
     root.present().map_err(|e| anyhow!("{e}"))?;
     Ok(())
@@ -270,24 +264,17 @@ fn draw_stability(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
         }
     }
     // The failure boundary: every cell edge between a failed and a passing cell.
-    let failed = |j: usize, i: usize| cells[j][i].map(AccuracyPoint::failed);
+    let failed = |(j, i): (usize, usize)| cells[j][i].map(AccuracyPoint::failed);
+    let differ = |a, b| matches!((failed(a), failed(b)), (Some(x), Some(y)) if x != y);
     use SegmentValue::Exact;
     let mut edges: Vec<[(SegmentValue<usize>, SegmentValue<usize>); 2]> = Vec::new();
     for j in 0..ny {
         for i in 0..nx {
-            if i + 1 < nx {
-                if let (Some(a), Some(b)) = (failed(j, i), failed(j, i + 1)) {
-                    if a != b {
-                        edges.push([(Exact(i + 1), Exact(j)), (Exact(i + 1), Exact(j + 1))]);
-                    }
-                }
+            if i + 1 < nx && differ((j, i), (j, i + 1)) {
+                edges.push([(Exact(i + 1), Exact(j)), (Exact(i + 1), Exact(j + 1))]);
             }
-            if j + 1 < ny {
-                if let (Some(a), Some(b)) = (failed(j, i), failed(j + 1, i)) {
-                    if a != b {
-                        edges.push([(Exact(i), Exact(j + 1)), (Exact(i + 1), Exact(j + 1))]);
-                    }
-                }
+            if j + 1 < ny && differ((j, i), (j + 1, i)) {
+                edges.push([(Exact(i), Exact(j + 1)), (Exact(i + 1), Exact(j + 1))]);
             }
         }
     }
