@@ -155,6 +155,50 @@ fn draw_pareto(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The stability map's colour scale: missed-collision fraction, log, floor to 1.
+fn draw_colour_scale(
+    area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+) -> anyhow::Result<()> {
+    let mut chart = ChartBuilder::on(area)
+        .margin_top(16)
+        .margin_bottom(66)
+        .margin_right(16)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..1.0_f64, (ERROR_FLOOR..1.0_f64).log_scale())
+        .map_err(|e| anyhow!("{e}"))?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_desc("missed fraction")
+        .axis_desc_style((FONT, 15))
+        .label_style((FONT, 14))
+        .y_label_formatter(&|y| format!("{y:.0e}"))
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    const SLICES: i32 = 100;
+    let at = |k: i32| ERROR_FLOOR.powf(1.0 - f64::from(k) / f64::from(SLICES));
+    chart
+        .draw_series((0..SLICES).map(|k| {
+            let (low, high) = (at(k), at(k + 1));
+            Rectangle::new(
+                [(0.0, low), (1.0, high)],
+                missed_colour((low * high).sqrt()).filled(),
+            )
+        }))
+        .map_err(|e| anyhow!("{e}"))?;
+    chart
+        .draw_series([PathElement::new(
+            [
+                (0.0, FAILURE_MISSED_FRACTION),
+                (1.0, FAILURE_MISSED_FRACTION),
+            ],
+            BLACK.stroke_width(3),
+        )])
+        .map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}
+
 /// Green (nothing missed) through yellow to red (everything missed), by log fraction.
 fn missed_colour(fraction: f64) -> RGBColor {
     if !fraction.is_finite() {
@@ -189,11 +233,17 @@ fn draw_stability(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
     let (nx, ny) = (columns.len().max(1), groups.len().max(1));
     let root = BitMapBackend::new(path, STABILITY_SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
-    let caption = format!(
-        "Stability map of the step method: missed-collision fraction (m) and max overlap (ov); black line: m = {FAILURE_MISSED_FRACTION:e}"
-    );
-    let mut chart = ChartBuilder::on(&root)
-        .caption(caption, (FONT, 19))
+    let root = root
+        .titled(
+            &format!(
+                "Stability map of the step method: missed-collision fraction (m) and max overlap (ov); black line: m = {FAILURE_MISSED_FRACTION:e}"
+            ),
+            (FONT, 19),
+        )
+        .map_err(|e| anyhow!("{e}"))?;
+    let (map_area, scale_area) = root.split_horizontally(STABILITY_SIZE.0 - 130);
+    draw_colour_scale(&scale_area)?;
+    let mut chart = ChartBuilder::on(&map_area)
         .margin(16)
         .x_label_area_size(50)
         .y_label_area_size(80)
