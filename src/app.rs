@@ -15,7 +15,10 @@ use crate::scene_file;
 use crate::spec::{InjectedSlowdown, Method};
 #[cfg(feature = "mpi")]
 use crate::summary::RunSummary;
-use crate::{analysis, calibrate, check, figures, manifest, render, report, results, runner};
+use crate::{
+    accuracy, accuracy_figures, analysis, calibrate, check, figures, manifest, render, report,
+    results, runner,
+};
 
 /// How a command that did its job ended: `main` maps this to the exit code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -113,14 +116,31 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
         )
     })?;
     let setups = analysis::analyse(&records)?;
+    let accuracy = if accuracy::is_accuracy_study(&records) {
+        let groups = accuracy::analyse(&records);
+        let (pareto, stability) = accuracy_figures::draw(&groups, &out)?;
+        let figures = [pareto, stability]
+            .iter()
+            .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .collect();
+        Some(report::AccuracySection { groups, figures })
+    } else {
+        None
+    };
     let mut pictures = report::Pictures {
         figures: Vec::with_capacity(setups.len()),
         scene: out
             .join(SCENE_PICTURE)
             .exists()
             .then(|| SCENE_PICTURE.to_owned()),
+        accuracy,
     };
     for (index, setup) in setups.iter().enumerate() {
+        // One backend at one worker count has no scaling to draw (e.g. accuracy studies).
+        if setup.backends.iter().map(|b| b.points.len()).sum::<usize>() < 2 {
+            pictures.figures.push(Vec::new());
+            continue;
+        }
         let drawn = figures::draw_setup(setup, &out, &format!("setup-{}", index + 1))?;
         let names = drawn
             .into_iter()

@@ -11,7 +11,7 @@ use plotters::prelude::*;
 use crate::analysis::{BackendScaling, Setup};
 use crate::manifest::Scaling;
 
-const FONT: &str = "sans-serif";
+pub(crate) const FONT: &str = "sans-serif";
 const SIZE: (u32, u32) = (900, 560);
 
 /// What a figure plots against workers.
@@ -84,17 +84,25 @@ impl Figure {
     }
 }
 
+/// The palette of series: backends, or the accuracy study's packings by index.
+pub(crate) const PALETTE: [RGBColor; 4] = [
+    RGBColor(0x1f, 0x77, 0xb4),
+    RGBColor(0xd6, 0x27, 0x28),
+    RGBColor(0x2c, 0xa0, 0x2c),
+    RGBColor(0x33, 0x33, 0x33),
+];
+
 /// One colour per backend, the same in every figure.
 fn colour(backend: &str) -> RGBColor {
     match backend {
-        "serial" => RGBColor(0x33, 0x33, 0x33),
-        "rayon" => RGBColor(0x1f, 0x77, 0xb4),
-        "mpi" => RGBColor(0xd6, 0x27, 0x28),
-        _ => RGBColor(0x2c, 0xa0, 0x2c),
+        "serial" => PALETTE[3],
+        "rayon" => PALETTE[0],
+        "mpi" => PALETTE[1],
+        _ => PALETTE[2],
     }
 }
 
-fn register_font() {
+pub(crate) fn register_font() {
     static FONT_ONCE: Once = Once::new();
     FONT_ONCE.call_once(|| {
         let bytes = include_bytes!("../assets/DejaVuSans.ttf");
@@ -244,14 +252,27 @@ fn draw(figure: Figure, setup: &Setup, path: &Path) -> anyhow::Result<()> {
             )
             .map_err(|e| anyhow!("{e}"))?;
     }
+    draw_legend(&mut chart, figure.legend_position(), 15)?;
+    root.present().map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}
+
+/// The series labels of every figure: framed, on a translucent white, at `position`.
+pub(crate) fn draw_legend<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+    font_size: u32,
+) -> anyhow::Result<()>
+where
+    DB: DrawingBackend + 'a,
+    CT: CoordTranslate,
+{
     chart
         .configure_series_labels()
-        .position(figure.legend_position())
-        .label_font((FONT, 15))
+        .position(position)
+        .label_font((FONT, font_size))
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
         .draw()
-        .map_err(|e| anyhow!("{e}"))?;
-    root.present().map_err(|e| anyhow!("{e}"))?;
-    Ok(())
+        .map_err(|e| anyhow!("{e}"))
 }

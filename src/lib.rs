@@ -3,6 +3,8 @@
 //!
 //! Arrows point one way: `app` → `backend` → `sim`. `sim` is pure.
 
+pub mod accuracy;
+pub mod accuracy_figures;
 pub mod analysis;
 pub mod app;
 pub mod backend;

@@ -15,7 +15,7 @@ use toml::Spanned;
 use crate::cli::BackendName;
 use crate::scene_file::{self, DtValue, Overrides};
 use crate::sim::Broadphase;
-use crate::spec::SceneSource;
+use crate::spec::{Method, Observe, RunSpec, SceneSource};
 
 /// A validated study: what to run, how often, and in which order.
 #[derive(Clone, Debug, PartialEq)]
@@ -82,8 +82,17 @@ impl Configuration {
             None => "-".to_owned(),
         };
         let show = |value: Option<String>| value.unwrap_or_else(|| "-".to_owned());
+        // Method and observe join the key only when swept, so the keys of manifests
+        // written before they could be swept (and their `--resume`) stay as they were.
+        let mut swept = String::new();
+        if let Some(method) = o.method {
+            swept.push_str(&format!(";method={}", method.name()));
+        }
+        if let Some(observe) = o.observe {
+            swept.push_str(&format!(";observe={}", observe.name()));
+        }
         format!(
-            "scene={};n={};packing={};dt={dt};steps={};seed={};broadphase={};backend={};workers={}",
+            "scene={};n={};packing={};dt={dt};steps={};seed={};broadphase={};backend={};workers={}{swept}",
             self.scene,
             show(o.n.map(|n| n.to_string())),
             show(o.packing.map(|p| p.to_string())),
@@ -125,6 +134,8 @@ impl Configuration {
         );
         push("--packing", o.packing.map(|p| p.to_string()));
         push("--broadphase", o.broadphase.map(|b| b.name().to_owned()));
+        push("--method", o.method.map(|m| m.name().to_owned()));
+        push("--observe", o.observe.map(|m| m.name().to_owned()));
         push("--backend", Some(self.backend_name().to_owned()));
         match self.backend {
             BackendName::Serial => {}
@@ -175,6 +186,8 @@ struct RawSweep {
     steps: Option<Spanned<Vec<i64>>>,
     seed: Option<Spanned<Vec<u64>>>,
     broadphase: Option<Spanned<Vec<Broadphase>>>,
+    method: Option<Spanned<Vec<Method>>>,
+    observe: Option<Spanned<Vec<Observe>>>,
     /// Keys whose lists pair up element by element instead of multiplying.
     zip: Option<Spanned<Vec<String>>>,
 }
@@ -282,12 +295,27 @@ pub fn parse(path: &Path, text: &str) -> Result<Study, ManifestError> {
                     overrides.n = Some(base * workers as i64);
                 }
                 // Every configuration is a valid scene: the same checks as `collide simulate`.
-                check_scene(&input, &overrides).map_err(|message| {
+                let spec = load_scene(&input, &overrides).map_err(|message| {
                     invalid(
                         offset,
                         format!("scene `{scene}` with {}: {message}", describe(&overrides)),
                     )
                 })?;
+                if spec.method.method == Method::Event && backend != BackendName::Serial {
+                    let at = raw
+                        .sweep
+                        .method
+                        .as_ref()
+                        .map_or(raw.backends.span().start, |m| m.span().start);
+                    return Err(invalid(
+                        at,
+                        format!(
+                            "scene `{scene}` with {} runs the event method, which runs on the serial backend only, but `backends` also lists {}; run the event method in a study with only `serial = true` (or sweep `method` over [\"step\"] here)",
+                            describe(&overrides),
+                            backend_label(backend)
+                        ),
+                    ));
+                }
                 let configuration = Configuration {
                     scene: scene.clone(),
                     input: input.clone(),
@@ -376,6 +404,8 @@ fn sweep_points(sweep: &RawSweep) -> Result<Vec<Overrides>, (usize, String)> {
     list!("steps", steps, |v: i64| v);
     list!("seed", seed, |v: u64| v);
     list!("broadphase", broadphase, |v: Broadphase| v);
+    list!("method", method, |v: Method| v);
+    list!("observe", observe, |v: Observe| v);
     for (key, offset, len, _) in &lists {
         if *len == 0 {
             return Err((
@@ -467,12 +497,21 @@ fn scene_input(raw: &RawScene, folder: &Path) -> Result<(String, SceneInput), St
 }
 
 /// Parses the configuration's scene as `collide simulate` would; the error's text if not.
-fn check_scene(input: &SceneInput, overrides: &Overrides) -> Result<(), String> {
-    let result = match input {
+fn load_scene(input: &SceneInput, overrides: &Overrides) -> Result<RunSpec, String> {
+    match input {
         SceneInput::File(path) => scene_file::load(path, overrides),
         SceneInput::Inline(text) => scene_file::parse(Path::new("(inline scene)"), text, overrides),
-    };
-    result.map(|_| ()).map_err(|e| e.to_string())
+    }
+    .map_err(|e| e.to_string())
+}
+
+/// The `backends` entry that names a backend, e.g. `rayon = [...]`.
+fn backend_label(backend: BackendName) -> &'static str {
+    match backend {
+        BackendName::Serial => "`serial = true`",
+        BackendName::Rayon => "`rayon = [...]`",
+        BackendName::Mpi => "`mpi = [...]`",
+    }
 }
 
 /// The n a weak-scaling study multiplies by the worker count.
@@ -480,12 +519,7 @@ fn per_worker_n(input: &SceneInput, overrides: &Overrides) -> Result<i64, String
     if let Some(n) = overrides.n {
         return Ok(n);
     }
-    let spec = match input {
-        SceneInput::File(path) => scene_file::load(path, overrides),
-        SceneInput::Inline(text) => scene_file::parse(Path::new("(inline scene)"), text, overrides),
-    }
-    .map_err(|e| e.to_string())?;
-    match spec.scene {
+    match load_scene(input, overrides)?.scene {
         SceneSource::Gas(gas) => Ok(gas.n_particles as i64),
         SceneSource::Explicit(_) => Err(
             "weak scaling multiplies n by the workers, and explicit disks have no n; use a random gas or strong scaling".into(),
@@ -503,6 +537,12 @@ fn describe(o: &Overrides) -> String {
     }
     if let Some(s) = o.steps {
         parts.push(format!("steps = {s}"));
+    }
+    if let Some(m) = o.method {
+        parts.push(format!("method = {}", m.name()));
+    }
+    if let Some(o) = o.observe {
+        parts.push(format!("observe = {}", o.name()));
     }
     if parts.is_empty() {
         "its own settings".into()
@@ -571,5 +611,51 @@ mod tests {
         let args = weak.configurations[2].simulate_args();
         assert!(args.windows(2).any(|w| w == ["--n", "400"]), "{args:?}");
         assert!(args.windows(2).any(|w| w == ["--threads", "4"]), "{args:?}");
+    }
+
+    #[test]
+    fn method_and_observe_sweep_like_the_other_keys() {
+        let swept = study(
+            "[sweep]\nmethod = [\"step\", \"event\"]\nobserve = [\"timing\", \"accuracy\"]\n[backends]\nserial = true\n",
+        );
+        let pairs: Vec<(Option<Method>, Option<Observe>)> = swept
+            .configurations
+            .iter()
+            .map(|c| (c.overrides.method, c.overrides.observe))
+            .collect();
+        assert_eq!(pairs.len(), 4);
+        assert!(pairs.contains(&(Some(Method::Event), Some(Observe::Accuracy))));
+        let event = swept
+            .configurations
+            .iter()
+            .find(|c| c.overrides.method == Some(Method::Event))
+            .unwrap();
+        let args = event.simulate_args();
+        assert!(
+            args.windows(2).any(|w| w == ["--method", "event"]),
+            "{args:?}"
+        );
+        assert!(event.key().contains(";method=event"), "{}", event.key());
+        // Unswept, the key keeps its old form, so older results resume.
+        let plain = study("[backends]\nserial = true\n");
+        assert!(plain.configurations[0].key().ends_with("workers=1"));
+    }
+
+    #[test]
+    fn the_event_method_on_a_parallel_backend_is_a_manifest_error() {
+        let text = format!(
+            "name = \"m\"\n[sweep]\nmethod = [\"step\", \"event\"]\n[backends]\nserial = true\nrayon = [2]\n{INLINE}"
+        );
+        let err = parse(Path::new("m.toml"), &text).unwrap_err().to_string();
+        assert!(err.starts_with("m.toml:3: "), "{err}");
+        assert!(
+            err.contains("serial backend only") && err.contains("rayon"),
+            "{err}"
+        );
+        let bad = format!(
+            "name = \"m\"\n[sweep]\nmethod = [\"exact\"]\n[backends]\nserial = true\n{INLINE}"
+        );
+        let err = parse(Path::new("m.toml"), &bad).unwrap_err().to_string();
+        assert!(err.starts_with("m.toml:3: "), "{err}");
     }
 }

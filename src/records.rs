@@ -14,7 +14,7 @@ use crate::manifest::Scaling;
 use crate::output::write_atomically;
 use crate::summary::RunSummary;
 
-pub const SCHEMA_VERSION: u32 = 2;
+pub const SCHEMA_VERSION: u32 = 3;
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
 const OLDEST_READABLE_VERSION: u32 = 1;
 
@@ -47,6 +47,8 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     (2, "energy_relative_error", Fill::F64(f64::NAN)),
     (2, "collapse_guard_fired", Fill::NullU64),
     (2, "cpu_s", Fill::F64(f64::NAN)),
+    // Version 2 did not record how far the rms disk moves per step.
+    (3, "rms_step_over_radius", Fill::F64(f64::NAN)),
 ];
 
 /// What became of one run.
@@ -117,6 +119,8 @@ pub struct Record {
     pub mean_overlap: f64,
     pub energy_relative_error: f64,
     pub collapse_guard_fired: Option<u64>,
+    /// v_rms·dt/r_min at the start (see the JSON summary); NaN where not known.
+    pub rms_step_over_radius: f64,
     pub oversubscribed: bool,
     pub hostname: String,
     pub cpu_model: String,
@@ -201,6 +205,7 @@ impl Record {
         record.mean_overlap = nan(summary.mean_overlap);
         record.energy_relative_error = nan(summary.energy_relative_error);
         record.collapse_guard_fired = summary.collapse_guard_fired;
+        record.rms_step_over_radius = nan(summary.rms_step_over_radius);
         record.oversubscribed = summary.oversubscribed;
         record
     }
@@ -270,6 +275,7 @@ impl Record {
             mean_overlap: f64::NAN,
             energy_relative_error: f64::NAN,
             collapse_guard_fired: None,
+            rms_step_over_radius: f64::NAN,
             oversubscribed: threads * ranks > env.logical_cores as u64,
             hostname: env.hostname.clone(),
             cpu_model: env.cpu_model.clone(),
@@ -374,7 +380,7 @@ macro_rules! for_each_column {
                  momentum_final_x, momentum_final_y, max_overlap, load_average_start,
                  load_average, load_average_end, events_per_s, collision_rate, temperature,
                  pressure, compressibility_z, missed_collision_fraction, mean_overlap,
-                 energy_relative_error;
+                 energy_relative_error, rms_step_over_radius;
             bool: oversubscribed, git_dirty;
             opt_u64: seed, missed_collisions, collapse_guard_fired
         )

@@ -4,6 +4,7 @@
 
 use std::fmt::Write as _;
 
+use crate::accuracy::{AccuracyPoint, FAILURE_MISSED_FRACTION, PackingGroup};
 use crate::analysis::{Baseline, Setup};
 use crate::figures::Figure;
 use crate::manifest::Scaling;
@@ -26,6 +27,16 @@ pub struct Pictures {
     pub figures: Vec<Vec<(Figure, String)>>,
     /// A picture of the scene (`collide render --png`), if one lies beside the report.
     pub scene: Option<String>,
+    /// An accuracy study's analysis and its figures (relative to the report).
+    pub accuracy: Option<AccuracySection>,
+}
+
+/// What the accuracy section shows ([`crate::accuracy::analyse`], `accuracy_figures`).
+#[derive(Clone, Debug, Default)]
+pub struct AccuracySection {
+    pub groups: Vec<PackingGroup>,
+    /// The speed-vs-accuracy and stability figures.
+    pub figures: Vec<String>,
 }
 
 /// The report of one study's records, analysed into `setups` ([`crate::analysis::analyse`]);
@@ -35,7 +46,14 @@ pub fn markdown(records: &[Record], setups: &[Setup], source: &str, pictures: &P
     let Some(first) = records.first() else {
         return "# Empty study\n\nNo records.\n".to_owned();
     };
-    let _ = writeln!(out, "# Scaling report: study `{}`\n", first.study);
+    // A study of one backend at one worker count per setup (an accuracy study) has no
+    // scaling to report: its timings are in the accuracy tables.
+    let scales = setups
+        .iter()
+        .any(|s| s.backends.iter().map(|b| b.points.len()).sum::<usize>() > 1);
+    let accuracy_only = pictures.accuracy.is_some() && !scales;
+    let kind = if accuracy_only { "Accuracy" } else { "Scaling" };
+    let _ = writeln!(out, "# {kind} report: study `{}`\n", first.study);
     let _ = writeln!(
         out,
         "Regenerate with `collide run experiments/{}.toml`, then `collide report {source}`.\n",
@@ -53,6 +71,12 @@ pub fn markdown(records: &[Record], setups: &[Setup], source: &str, pictures: &P
     }
     environment(&mut out, first, records);
     warnings(&mut out, records, setups);
+    if let Some(section) = &pictures.accuracy {
+        accuracy_section(&mut out, section);
+    }
+    if accuracy_only {
+        return out;
+    }
     for (index, setup) in setups.iter().enumerate() {
         setup_section(&mut out, setup);
         for (figure, file) in pictures.figures.get(index).into_iter().flatten() {
@@ -399,5 +423,106 @@ fn findings(out: &mut String, setups: &[Setup]) {
                 );
             }
         }
+    }
+}
+
+fn accuracy_section(out: &mut String, section: &AccuracySection) {
+    let _ = writeln!(
+        out,
+        "## Accuracy: the step method against the event-driven reference
+"
+    );
+    let _ = writeln!(
+        out,
+        "Each row is the median of its repetitions. Errors of the pressure (Z = P·A/(N·T)) and \
+         of the collision rate ω are relative to the event method at the same packing and \
+         the same initial state; a step fails (**bold**) when it misses more than \
+         {FAILURE_MISSED_FRACTION:e} of its collisions. Speed is simulated time per wall \
+         second (every run simulates the same time, so it compares methods at equal \
+         physics); particle-steps/s counts each method's own steps.\n"
+    );
+    let cell = |value: f64, text: String| {
+        if value.is_finite() {
+            text
+        } else {
+            "—".to_owned()
+        }
+    };
+    for group in &section.groups {
+        let _ = writeln!(out, "### Packing {:.2}\n", group.packing);
+        let _ = writeln!(
+            out,
+            "| method | dt | v_rms·dt/r | wall s | sim time / s | particle-steps/s | missed fraction | max overlap | Z | Z error | ω | ω error |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+        );
+        let row = |out: &mut String, p: &AccuracyPoint| {
+            let missed = match p.missed_fraction {
+                0.0 => "0".to_owned(),
+                m => cell(m, format!("{m:.2e}")),
+            };
+            let missed = if p.failed() {
+                format!("**{missed}**")
+            } else {
+                missed
+            };
+            let _ = writeln!(
+                out,
+                "| {} | {} | {} | {:.4} | {:.1} | {:.3e} | {missed} | {:.3} | {:.4} | {} | {:.4} | {} |",
+                p.method,
+                p.dt,
+                cell(p.step_over_radius, format!("{:.3}", p.step_over_radius)),
+                p.wall_s,
+                p.sim_time_per_s,
+                p.particle_steps_per_s,
+                p.max_overlap,
+                p.compressibility_z,
+                cell(p.z_error, format!("{:+.2}%", 100.0 * p.z_error)),
+                p.collision_rate,
+                cell(p.rate_error, format!("{:+.2}%", 100.0 * p.rate_error)),
+            );
+        };
+        if let Some(reference) = &group.reference {
+            let _ = writeln!(
+                out,
+                "| event | exact | — | {:.4} | {:.1} | {:.3e} | 0 | {:.1e} | {:.4} | reference | {:.4} | reference |",
+                reference.wall_s,
+                reference.sim_time_per_s,
+                reference.particle_steps_per_s,
+                reference.max_overlap,
+                reference.compressibility_z,
+                reference.collision_rate,
+            );
+        }
+        for point in &group.steps {
+            row(out, point);
+        }
+        let _ = writeln!(out);
+        match group.steps.iter().rev().find(|p| p.failed()) {
+            Some(worst_ok) => {
+                let largest_ok = group
+                    .steps
+                    .iter()
+                    .find(|p| p.missed_fraction.is_finite() && !p.failed());
+                let _ = writeln!(
+                    out,
+                    "The step method fails at v_rms·dt/r ≥ {:.3}{}.\n",
+                    worst_ok.step_over_radius,
+                    largest_ok.map_or_else(String::new, |p| format!(
+                        "; the largest passing step is v_rms·dt/r = {:.3} (Z error {:+.2}%, {:.1}× the event method's speed)",
+                        p.step_over_radius,
+                        100.0 * p.z_error,
+                        group
+                            .reference
+                            .as_ref()
+                            .map_or(f64::NAN, |r| p.sim_time_per_s / r.sim_time_per_s)
+                    ))
+                );
+            }
+            None => {
+                let _ = writeln!(out, "No measured step fails here.\n");
+            }
+        }
+    }
+    for figure in &section.figures {
+        let _ = writeln!(out, "![{figure}]({figure})\n");
     }
 }

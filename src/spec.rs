@@ -144,20 +144,8 @@ impl RunSpec {
             ),
         };
         let tc = self.method.tc.unwrap_or_else(|| {
-            let n = scene.particles.len().max(1) as f64;
-            let mean_square = scene
-                .particles
-                .vx
-                .iter()
-                .zip(&scene.particles.vy)
-                .map(|(vx, vy)| vx * vx + vy * vy)
-                .sum::<f64>()
-                / n;
-            let speed = if mean_square > 0.0 {
-                mean_square.sqrt()
-            } else {
-                1.0
-            };
+            let rms = scene.particles.rms_speed();
+            let speed = if rms > 0.0 { rms } else { 1.0 };
             DEFAULT_TC_FRACTION * scene.particles.min_radius() / speed
         });
         Ok(PreparedRun {

@@ -114,6 +114,10 @@ pub struct RunSummary {
     /// to 40 evenly spaced steps; else null.
     #[serde(default)]
     pub temperature_curve: Option<Vec<[f64; 2]>>,
+    /// v_rms·dt/r_min of the initial state: how far the rms disk moves per step, in
+    /// radii (the accuracy study's x axis); null for a state at rest.
+    #[serde(default)]
+    pub rms_step_over_radius: Option<f64>,
 }
 
 fn default_method() -> String {

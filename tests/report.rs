@@ -71,6 +71,7 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         collapse_guard_fired: None,
         collapse_tc: None,
         temperature_curve: None,
+        rms_step_over_radius: Some(0.1),
     }
 }
 
@@ -144,6 +145,7 @@ fn markdown(records: &[Record]) -> String {
     let pictures = report::Pictures {
         figures,
         scene: Some("scene.png".into()),
+        accuracy: None,
     };
     report::markdown(records, &setups, "results/synthetic/", &pictures)
 }
@@ -346,4 +348,99 @@ fn a_file_missing_a_measured_column_or_from_a_newer_collide_is_refused_with_the_
             "{stderr}"
         );
     }
+}
+
+/// An accuracy study from the fixed records: at packings 0.05 and 0.4, the event
+/// reference and the step method at v_rms·dt/r = 1, 0.1 and 0.01, whose missed
+/// fraction and pressure error shrink with dt (1 and 0.1 fail, 0.01 passes).
+fn accuracy_records() -> Vec<Record> {
+    let template = records()
+        .into_iter()
+        .find(|r| r.backend == "serial")
+        .unwrap();
+    let mut out = Vec::new();
+    for packing in [0.05, 0.4] {
+        for (method, dt, missed, z_factor, wall_s) in [
+            ("event", 0.1, 0.0, 1.0, 0.05),
+            ("step", 1.0, 0.2, 0.6, 0.004),
+            ("step", 0.1, 0.004, 0.95, 0.03),
+            ("step", 0.01, 0.0002, 0.995, 0.3),
+        ] {
+            let mut record = template.clone();
+            record.method = method.into();
+            record.observe = if method == "step" {
+                "accuracy"
+            } else {
+                "timing"
+            }
+            .into();
+            record.packing = packing;
+            record.dt = dt;
+            record.steps = (10.0 / dt).round() as u64;
+            record.rms_step_over_radius = dt;
+            // Denser gases take longer, so the packings' curves do not overlap.
+            record.wall_s = wall_s * (1.0 + 4.0 * packing);
+            record.missed_collision_fraction = missed;
+            record.max_overlap = dt.min(1.0);
+            record.compressibility_z = (1.0 + 4.0 * packing) * z_factor;
+            record.collision_rate = (0.1 + packing) * z_factor;
+            out.push(record);
+        }
+    }
+    out
+}
+
+#[test]
+fn the_accuracy_report_tabulates_errors_and_draws_the_pareto_and_stability_figures() {
+    use collide::{accuracy, accuracy_figures};
+    let records = accuracy_records();
+    assert!(accuracy::is_accuracy_study(&records));
+    assert!(!accuracy::is_accuracy_study(&self::records()));
+    let groups = accuracy::analyse(&records);
+    let dir = tempfile::tempdir().unwrap();
+    let (pareto, stability) = accuracy_figures::draw(&groups, dir.path()).unwrap();
+    let count =
+        |image: &image::RgbImage, rgb: [u8; 3]| image.pixels().filter(|p| p.0 == rgb).count();
+    let pareto = image::open(&pareto).unwrap().to_rgb8();
+    assert_eq!(pareto.dimensions(), (1400, 600));
+    // Both packings' curves (the palette's blue and red) are drawn.
+    let blue = count(&pareto, [0x1f, 0x77, 0xb4]);
+    let red = count(&pareto, [0xd6, 0x27, 0x28]);
+    assert!(blue > 200 && red > 200, "blue {blue}, red {red}");
+    let stability = image::open(&stability).unwrap().to_rgb8();
+    assert_eq!(stability.dimensions(), (1100, 560));
+    // Six cells (two packings × three steps) in colours from green to red, and the
+    // failure boundary in black.
+    let white = count(&stability, [255, 255, 255]);
+    assert!(white < 1100 * 560 / 2, "mostly blank: {white} white pixels");
+    assert!(count(&stability, [0, 0, 0]) > 500);
+    let pictures = report::Pictures {
+        accuracy: Some(report::AccuracySection {
+            groups,
+            figures: vec![
+                "accuracy-pareto.png".into(),
+                "accuracy-stability.png".into(),
+            ],
+        }),
+        ..Default::default()
+    };
+    let setups = analysis::analyse(&records).unwrap();
+    let text = report::markdown(&records, &setups, "results/accuracy/", &pictures);
+    assert!(text.starts_with("# Accuracy report"), "{text}");
+    assert!(text.contains("### Packing 0.40"), "{text}");
+    // dt = 0.1 at packing 0.4: simulated time 10 in 0.03·2.6 s, Z = 2.6·0.95 against 2.6
+    // (a −5% error), and it fails (4e-3 missed > 1e-3).
+    assert!(
+        text.contains(
+            "| step | 0.1 | 0.100 | 0.0780 | 128.2 | 4.000e7 | **4.00e-3** | 0.100 | 2.4700 | -5.00% |"
+        ),
+        "{text}"
+    );
+    assert!(
+        text.contains("The step method fails at v_rms·dt/r ≥ 0.100"),
+        "{text}"
+    );
+    assert!(text.contains("![accuracy-stability.png](accuracy-stability.png)"));
+    // One run per setup: no scaling sections.
+    assert!(!text.contains("Seconds per run"), "{text}");
 }

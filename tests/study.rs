@@ -65,6 +65,14 @@ fn bad_manifests_name_the_line_the_field_and_the_fix() {
             &["backends.rayon", "at least 1"],
         ),
         ("[backends]\n", &["runs nothing"]),
+        (
+            "[sweep]\nmethod = [\"step\", \"event\"]\n[backends]\nserial = true\nrayon = [2]\n",
+            &[":3:", "serial backend only", "rayon"],
+        ),
+        (
+            "[sweep]\nobserve = [\"everything\"]\n[backends]\nserial = true\n",
+            &[":3:", "expected `timing` or `accuracy`"],
+        ),
     ];
     for (body, fragments) in cases {
         let path = manifest(dir.path(), body);
@@ -147,6 +155,58 @@ fn a_study_records_every_repetition_and_resume_runs_only_what_is_missing() {
         "{table}"
     );
     assert!(table.contains("all runs agree"), "{table}");
+}
+
+#[test]
+fn an_accuracy_study_runs_both_methods_and_reports_pareto_and_stability_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    let path = manifest(
+        dir.path(),
+        "repetitions = 1\nwarmups = 0\n[sweep]\ndt = [0.5, 0.1, 0.1]\nsteps = [4, 20, 20]\n\
+         method = [\"step\", \"step\", \"event\"]\n\
+         observe = [\"accuracy\", \"accuracy\", \"timing\"]\n\
+         zip = [\"dt\", \"steps\", \"method\", \"observe\"]\n[backends]\nserial = true\n",
+    );
+    let run = collide(&["run", &path, "--out", out.to_str().unwrap()]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let rows = records::read(&records::files_in(&out.join("tiny")).unwrap()[0]).unwrap();
+    let methods: Vec<(&str, &str)> = rows
+        .iter()
+        .map(|r| (r.method.as_str(), r.observe.as_str()))
+        .collect();
+    assert_eq!(
+        methods,
+        [
+            ("step", "accuracy"),
+            ("step", "accuracy"),
+            ("event", "timing")
+        ]
+    );
+    assert!(rows.iter().all(|r| r.rms_step_over_radius > 0.0));
+    assert!(rows[0].missed_collisions.is_some() && rows[2].missed_collisions == Some(0));
+    let reports = dir.path().join("reports");
+    let report = collide(&[
+        "report",
+        out.join("tiny").to_str().unwrap(),
+        "--out",
+        reports.to_str().unwrap(),
+    ]);
+    assert!(
+        report.status.success(),
+        "{}",
+        String::from_utf8_lossy(&report.stderr)
+    );
+    let text = std::fs::read_to_string(reports.join("report.md")).unwrap();
+    assert!(text.contains("## Accuracy"), "{text}");
+    for figure in ["accuracy-pareto.png", "accuracy-stability.png"] {
+        assert!(text.contains(figure), "{text}");
+        assert!(reports.join(figure).exists(), "{figure}");
+    }
 }
 
 #[test]

@@ -339,5 +339,9 @@ pub fn summarize(
             .filter(|_| physics.restitution < 1.0)
             .map(|(_, tc)| tc),
         temperature_curve: accuracy.temperature_curve.clone().filter(|_| !elastic),
+        rms_step_over_radius: {
+            let step = scene.particles.rms_speed() * prepared.params.dt;
+            (step > 0.0).then(|| step / scene.particles.min_radius())
+        },
     }
 }

@@ -213,6 +213,18 @@ impl Particles {
         self.radius.iter().copied().fold(f64::INFINITY, f64::min)
     }
 
+    /// Root-mean-square speed √⟨v²⟩, 0 for an empty set.
+    pub fn rms_speed(&self) -> f64 {
+        let n = self.vx.len().max(1) as f64;
+        let sum: f64 = self
+            .vx
+            .iter()
+            .zip(&self.vy)
+            .map(|(vx, vy)| vx * vx + vy * vy)
+            .sum();
+        (sum / n).sqrt()
+    }
+
     /// Largest speed, 0 for an empty set.
     pub fn max_speed(&self) -> f64 {
         self.vx

@@ -1,0 +1,255 @@
+//! The accuracy study's analysis: the successful runs grouped by packing, method and dt,
+//! each step-method point's errors against the event-driven reference at the same
+//! packing, and the Pareto front of speed against error. Pure: records in, numbers out;
+//! the report and `accuracy_figures` present them.
+
+use std::collections::BTreeMap;
+
+use crate::records::{Record, STATUS_OK};
+use crate::results::median;
+
+/// A missed-collision fraction above this is a failed step (the stability map's boundary;
+/// issue 6's default tolerance for `dt = "auto"`).
+pub const FAILURE_MISSED_FRACTION: f64 = 1e-3;
+
+/// One method at one packing and dt: medians over its repetitions.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AccuracyPoint {
+    pub method: String,
+    pub packing: f64,
+    pub dt: f64,
+    /// v_rms·dt/r_min (NaN in records older than schema version 3).
+    pub step_over_radius: f64,
+    /// Simulated time steps·dt.
+    pub sim_time: f64,
+    pub runs: usize,
+    pub wall_s: f64,
+    pub particle_steps_per_s: f64,
+    /// Simulated time per wall second (steps·dt / wall_s): the speed at equal physics.
+    pub sim_time_per_s: f64,
+    /// NaN where not measured (step method without `observe = "accuracy"`).
+    pub missed_fraction: f64,
+    pub max_overlap: f64,
+    pub compressibility_z: f64,
+    pub collision_rate: f64,
+    /// (Z − Z_ref)/Z_ref against the event reference at the same packing; NaN without one.
+    pub z_error: f64,
+    /// (ω − ω_ref)/ω_ref likewise.
+    pub rate_error: f64,
+}
+
+impl AccuracyPoint {
+    /// The step failed: more than [`FAILURE_MISSED_FRACTION`] of its collisions missed.
+    pub fn failed(&self) -> bool {
+        self.missed_fraction > FAILURE_MISSED_FRACTION
+    }
+}
+
+/// Every point at one packing: the event reference (if run) and the step method by
+/// decreasing dt.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PackingGroup {
+    pub packing: f64,
+    pub reference: Option<AccuracyPoint>,
+    pub steps: Vec<AccuracyPoint>,
+}
+
+/// A study is an accuracy study when it ran the event method or observed accuracy.
+pub fn is_accuracy_study(records: &[Record]) -> bool {
+    records
+        .iter()
+        .any(|r| r.status == STATUS_OK && (r.method == "event" || r.observe == "accuracy"))
+}
+
+/// The successful serial runs grouped by packing (ascending), each step point compared
+/// with the event run of the same packing (the first, if several dt were run).
+pub fn analyse(records: &[Record]) -> Vec<PackingGroup> {
+    // Packing is a float computed from the box: group on its 4-decimal text, the
+    // precision the report prints, so equal manifest packings land together.
+    let mut runs: BTreeMap<(String, String, String), Vec<&Record>> = BTreeMap::new();
+    for record in records.iter().filter(|r| r.status == STATUS_OK) {
+        let key = (
+            format!("{:.4}", record.packing),
+            record.method.clone(),
+            format!("{:e}", record.dt),
+        );
+        runs.entry(key).or_default().push(record);
+    }
+    let mut groups: BTreeMap<String, PackingGroup> = BTreeMap::new();
+    for ((packing_key, method, _), group) in &runs {
+        let point = summarise(method, group);
+        let entry = groups
+            .entry(packing_key.clone())
+            .or_insert_with(|| PackingGroup {
+                packing: point.packing,
+                reference: None,
+                steps: Vec::new(),
+            });
+        if method == "event" {
+            entry.reference.get_or_insert(point);
+        } else {
+            entry.steps.push(point);
+        }
+    }
+    let mut groups: Vec<PackingGroup> = groups.into_values().collect();
+    groups.sort_by(|a, b| a.packing.total_cmp(&b.packing));
+    for group in &mut groups {
+        group.steps.sort_by(|a, b| b.dt.total_cmp(&a.dt));
+        if let Some(reference) = &group.reference {
+            let (z_ref, rate_ref) = (reference.compressibility_z, reference.collision_rate);
+            for point in &mut group.steps {
+                point.z_error = relative_error(point.compressibility_z, z_ref);
+                point.rate_error = relative_error(point.collision_rate, rate_ref);
+            }
+        }
+        if let Some(reference) = &mut group.reference {
+            reference.z_error = 0.0;
+            reference.rate_error = 0.0;
+        }
+    }
+    groups
+}
+
+fn relative_error(value: f64, reference: f64) -> f64 {
+    if reference != 0.0 {
+        (value - reference) / reference
+    } else {
+        f64::NAN
+    }
+}
+
+/// Medians of one (packing, method, dt) group of runs.
+fn summarise(method: &str, runs: &[&Record]) -> AccuracyPoint {
+    let med = |field: fn(&Record) -> f64| {
+        let mut values: Vec<f64> = runs.iter().map(|r| field(r)).collect();
+        median(&mut values)
+    };
+    let first = runs[0];
+    let wall_s = med(|r| r.wall_s);
+    let sim_time = first.steps as f64 * first.dt;
+    AccuracyPoint {
+        method: method.to_owned(),
+        packing: first.packing,
+        dt: first.dt,
+        step_over_radius: med(|r| r.rms_step_over_radius),
+        sim_time,
+        runs: runs.len(),
+        wall_s,
+        particle_steps_per_s: med(|r| r.particle_steps_per_s),
+        sim_time_per_s: sim_time / wall_s,
+        missed_fraction: med(|r| r.missed_collision_fraction),
+        max_overlap: med(|r| r.max_overlap),
+        compressibility_z: med(|r| r.compressibility_z),
+        collision_rate: med(|r| r.collision_rate),
+        z_error: f64::NAN,
+        rate_error: f64::NAN,
+    }
+}
+
+/// Which of the (speed, error) points are Pareto-optimal: no other point is at least as
+/// fast and at least as accurate and better in one. Points with a NaN are never on it.
+pub fn pareto_front(points: &[(f64, f64)]) -> Vec<bool> {
+    points
+        .iter()
+        .map(|&(speed, error)| {
+            !speed.is_nan()
+                && !error.is_nan()
+                && !points
+                    .iter()
+                    .any(|&(s, e)| s >= speed && e <= error && (s > speed || e < error))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::environment::Environment;
+    use crate::records::RecordContext;
+
+    /// A successful record with nothing measured yet.
+    fn blank_ok() -> Record {
+        let environment = Environment {
+            hostname: "h".into(),
+            cpu_model: "c".into(),
+            logical_cores: 2,
+            physical_cores: 2,
+            memory_bytes: 1,
+            os: "o".into(),
+            rustc: "r".into(),
+            profile: "release".into(),
+            features: String::new(),
+            git_commit: "g".into(),
+            git_dirty: false,
+            mpi_library: "none".into(),
+            load_average_start: 0.0,
+        };
+        let context = RecordContext {
+            study: "accuracy",
+            manifest_hash: "m",
+            build_id: "b",
+            config_key: "k",
+            scene: "gas",
+            scaling: "strong",
+            backend: "serial",
+            workers: 1,
+            repetition: 0,
+            environment: &environment,
+            study_started_utc: "2026-11-22T18:00:00Z",
+        };
+        let mut record = Record::failed(&context, STATUS_OK, String::new());
+        record.status = STATUS_OK.to_owned();
+        record
+    }
+
+    #[test]
+    fn the_pareto_front_keeps_the_points_nothing_beats() {
+        // (speed, error): (3, 0.5) beats (2, 0.6); (1, 0.01) and (3, 0.5) trade off;
+        // the NaN point is left out; equal points are both kept.
+        let points = [
+            (3.0, 0.5),
+            (2.0, 0.6),
+            (1.0, 0.01),
+            (f64::NAN, 0.0),
+            (1.0, 0.01),
+        ];
+        assert_eq!(pareto_front(&points), [true, false, true, false, true]);
+    }
+
+    #[test]
+    fn relative_errors_are_against_the_event_run_of_the_same_packing() {
+        let record = |method: &str, packing: f64, dt: f64, z: f64, rate: f64, wall: f64| {
+            let mut r = blank_ok();
+            r.method = method.to_owned();
+            r.packing = packing;
+            r.dt = dt;
+            r.steps = (60.0 / dt).round() as u64;
+            r.compressibility_z = z;
+            r.collision_rate = rate;
+            r.wall_s = wall;
+            r.missed_collision_fraction = if method == "event" { 0.0 } else { dt / 10.0 };
+            r
+        };
+        let records = [
+            record("step", 0.4, 0.01, 2.75, 1.40, 1.0),
+            record("event", 0.4, 0.1, 2.80, 1.50, 0.2),
+            record("step", 0.4, 0.1, 2.52, 1.20, 0.1),
+            record("step", 0.4, 0.1, 2.52, 1.20, 0.3),
+            record("step", 0.05, 0.1, 1.10, 0.09, 0.1),
+        ];
+        let groups = analyse(&records);
+        assert_eq!(groups.len(), 2);
+        assert!(groups[0].reference.is_none() && groups[0].steps[0].z_error.is_nan());
+        let dense = &groups[1];
+        assert_eq!(dense.reference.as_ref().unwrap().compressibility_z, 2.80);
+        let dts: Vec<f64> = dense.steps.iter().map(|p| p.dt).collect();
+        assert_eq!(dts, [0.1, 0.01]);
+        let coarse = &dense.steps[0];
+        assert_eq!(coarse.runs, 2);
+        assert!((coarse.wall_s - 0.2).abs() < 1e-12);
+        assert!((coarse.sim_time_per_s - 300.0).abs() < 1e-9);
+        assert!((coarse.z_error - (-0.1)).abs() < 1e-12);
+        assert!((coarse.rate_error - (-0.2)).abs() < 1e-12);
+        assert!(coarse.failed() && !dense.steps[1].failed());
+    }
+}
