@@ -46,8 +46,9 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     (2, "mean_overlap", Fill::F64(f64::NAN)),
     (2, "energy_relative_error", Fill::F64(f64::NAN)),
     (2, "collapse_guard_fired", Fill::NullU64),
-    (2, "cpu_s", Fill::F64(f64::NAN)),
-    // Version 2 did not record how far the rms disk moves per step.
+    // Version 2 did not record the stepping loop's CPU time (some of its files do) or
+    // how far the rms disk moves per step.
+    (3, "cpu_s", Fill::F64(f64::NAN)),
     (3, "rms_step_over_radius", Fill::F64(f64::NAN)),
 ];
 

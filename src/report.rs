@@ -185,7 +185,7 @@ fn noise_warning(out: &mut String, records: &[Record], setups: &[Setup]) {
         .map(|r| r.load_average)
         .filter(|l| l.is_finite())
         .fold(0.0, f64::max);
-    let spread: Vec<String> = setups
+    let mut spread: Vec<String> = setups
         .iter()
         .flat_map(|setup| {
             setup.backends.iter().flat_map(move |b| {
@@ -201,6 +201,9 @@ fn noise_warning(out: &mut String, records: &[Record], setups: &[Setup]) {
             })
         })
         .collect();
+    // Setups that differ only in what this list does not name (dt, method) appear once.
+    let mut seen = std::collections::HashSet::new();
+    spread.retain(|label| seen.insert(label.clone()));
     if busiest > cores || !spread.is_empty() {
         let spread = if spread.is_empty() {
             String::new()
