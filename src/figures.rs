@@ -112,6 +112,35 @@ pub(crate) fn register_font() {
     });
 }
 
+/// Ticks of a log axis over `low..high` at 1, 2 and 5 times the powers of ten, so that a
+/// range narrower than a decade still gets several labels; only the powers of ten when
+/// that would make more than [`MAX_LOG_TICKS`].
+fn log_ticks(low: f64, high: f64) -> Vec<f64> {
+    let mut ticks = Vec::new();
+    let mut decade = 10_f64.powf(low.log10().floor());
+    while decade <= high {
+        for mantissa in [1.0, 2.0, 5.0] {
+            let tick = mantissa * decade;
+            if (low..=high).contains(&tick) {
+                ticks.push((mantissa, tick));
+            }
+        }
+        decade *= 10.0;
+    }
+    if ticks.len() > MAX_LOG_TICKS {
+        ticks.retain(|&(mantissa, _)| mantissa == 1.0);
+    }
+    ticks.into_iter().map(|(_, tick)| tick).collect()
+}
+
+const MAX_LOG_TICKS: usize = 8;
+
+/// A tick value with as many decimals as it needs (0.002, 0.5, 20, 5000).
+fn tick_label(value: f64) -> String {
+    let decimals = (-value.log10().floor()).max(0.0) as usize;
+    format!("{value:.decimals$}")
+}
+
 /// Draws every figure of `setup` into `dir` as `<prefix>-<figure>.png`; returns the paths.
 pub fn draw_setup(
     setup: &Setup,
@@ -189,7 +218,9 @@ fn draw(figure: Figure, setup: &Setup, path: &Path) -> anyhow::Result<()> {
             (0.8_f64..max_workers * 1.25)
                 .log_scale()
                 .with_key_points(x_ticks),
-            (y_low..y_high).log_scale(),
+            (y_low..y_high)
+                .log_scale()
+                .with_key_points(log_ticks(y_low, y_high)),
         )
         .map_err(|e| anyhow!("{e}"))?;
     chart
@@ -198,10 +229,9 @@ fn draw(figure: Figure, setup: &Setup, path: &Path) -> anyhow::Result<()> {
         .y_desc(figure.axis(setup.scaling))
         .axis_desc_style((FONT, 18))
         .label_style((FONT, 15))
-        .y_labels(6)
         .light_line_style(BLACK.mix(0.04))
         .x_label_formatter(&|x| format!("{x:.0}"))
-        .y_label_formatter(&|y| format!("{y:.3}"))
+        .y_label_formatter(&|y| tick_label(*y))
         .draw()
         .map_err(|e| anyhow!("{e}"))?;
     match figure {
@@ -275,4 +305,23 @@ where
         .border_style(BLACK)
         .draw()
         .map_err(|e| anyhow!("{e}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn log_ticks_label_narrow_ranges_and_thin_out_wide_ones() {
+        let narrow = log_ticks(4.0, 25.0);
+        assert_eq!(narrow.len(), 3);
+        for (tick, expected) in narrow.iter().zip([5.0, 10.0, 20.0]) {
+            assert!((tick - expected).abs() < 1e-9, "{narrow:?}");
+        }
+        let wide = log_ticks(0.0015, 300.0);
+        assert_eq!(wide.len(), 5, "{wide:?}");
+        assert_eq!(tick_label(0.002), "0.002");
+        assert_eq!(tick_label(0.5), "0.5");
+        assert_eq!(tick_label(20.0), "20");
+    }
 }
