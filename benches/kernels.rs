@@ -1,4 +1,5 @@
-//! Criterion benches of the simulator's kernels: one full serial step, the broad phase
+//! Criterion benches of the simulator's kernels: one full serial step (and, as a
+//! yardstick, one step of a straightforward cell list), the broad phase
 //! (grid build and pair search) and the contact resolution at N = 100,000; one full step
 //! of the serial and the rayon (2 threads) backends at N = 1,000,000; and one step of
 //! the distributed backend on 2 ranks as threads (`ThreadComm`) at N = 100,000, through
@@ -17,9 +18,11 @@ use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_m
 use collide::backend::comm::ThreadComm;
 use collide::backend::distributed;
 use collide::backend::threads::ThreadedStepper;
+use collide::sim::collision::resolve_contact;
 use collide::sim::event::{EventParams, EventSim};
 use collide::sim::scene::GasSpec;
-use collide::sim::{Boundary, Broadphase, Particles, Scene, StepParams, Stepper};
+use collide::sim::step::advance_disks;
+use collide::sim::{Boundary, Broadphase, Domain, Particles, Physics, Scene, StepParams, Stepper};
 use collide::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
 
 /// r = 1 and v_rms = 1 stepped with dt = 0.1, so v_rms·dt = 0.1·r.
@@ -52,6 +55,100 @@ fn warmed_up_serial(scene: &Scene) -> (Particles, Stepper) {
     (particles, stepper)
 }
 
+/// Issue 2's yardstick, "a straightforward cell-list code", benched beside our step so
+/// that their ratio is measured in one run on one machine: square cells one contact
+/// diameter wide rebuilt by a counting sort every step, each disk tested against the rest
+/// of its cell and the four forward neighbour cells, contacts resolved as found (with
+/// our impulse law and motion, so only the search and its order differ; walls only).
+struct StraightforwardCellList {
+    domain: Domain,
+    physics: Physics,
+    cell: f64,
+    nx: usize,
+    ny: usize,
+    /// Start of each cell's disks in `order`, and one past the last.
+    starts: Vec<usize>,
+    order: Vec<usize>,
+}
+
+impl StraightforwardCellList {
+    fn new(scene: &Scene) -> Self {
+        let cell = 2.0 * scene.particles.max_radius();
+        let nx = ((scene.domain.width / cell) as usize).max(1);
+        let ny = ((scene.domain.height / cell) as usize).max(1);
+        StraightforwardCellList {
+            domain: scene.domain,
+            physics: scene.physics,
+            cell: scene.domain.width / nx as f64,
+            nx,
+            ny,
+            starts: vec![0; nx * ny + 1],
+            order: vec![0; scene.particles.len()],
+        }
+    }
+
+    fn cell_of(&self, x: f64, y: f64) -> usize {
+        let cx = ((x / self.cell) as usize).min(self.nx - 1);
+        let cy = ((y / self.cell) as usize).min(self.ny - 1);
+        cy * self.nx + cx
+    }
+
+    fn step(&mut self, particles: &mut Particles) {
+        advance_disks(
+            &self.domain,
+            &self.physics,
+            PARAMS.dt,
+            particles.disk_slices_mut(),
+        );
+        self.starts.fill(0);
+        for i in 0..particles.len() {
+            let c = self.cell_of(particles.x[i], particles.y[i]);
+            self.starts[c + 1] += 1;
+        }
+        for c in 0..self.nx * self.ny {
+            self.starts[c + 1] += self.starts[c];
+        }
+        let mut next = self.starts.clone();
+        for i in 0..particles.len() {
+            let c = self.cell_of(particles.x[i], particles.y[i]);
+            self.order[next[c]] = i;
+            next[c] += 1;
+        }
+        let (domain, e) = (self.domain, self.physics.restitution);
+        let test = |particles: &mut Particles, i: usize, j: usize| {
+            let (dx, dy) = (
+                particles.x[j] - particles.x[i],
+                particles.y[j] - particles.y[i],
+            );
+            let contact = particles.radius[i] + particles.radius[j];
+            if dx * dx + dy * dy < contact * contact {
+                resolve_contact(particles, &domain, e, i, j);
+            }
+        };
+        for cy in 0..self.ny {
+            for cx in 0..self.nx {
+                let here = self.starts[cy * self.nx + cx]..self.starts[cy * self.nx + cx + 1];
+                for a in here.clone() {
+                    let i = self.order[a];
+                    for b in a + 1..here.end {
+                        test(particles, i, self.order[b]);
+                    }
+                    for (ox, oy) in [(1, 0), (-1, 1), (0, 1), (1, 1)] {
+                        let (nx, ny) = (cx as isize + ox, cy as isize + oy);
+                        if nx < 0 || nx >= self.nx as isize || ny >= self.ny as isize {
+                            continue;
+                        }
+                        let c = ny as usize * self.nx + nx as usize;
+                        for b in self.starts[c]..self.starts[c + 1] {
+                            test(particles, i, self.order[b]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
 fn serial_kernels(c: &mut Criterion) {
     const N: usize = 100_000;
     let mut group = c.benchmark_group("serial");
@@ -62,6 +159,18 @@ fn serial_kernels(c: &mut Criterion) {
         group.bench_function(BenchmarkId::new("step", packing), |b| {
             b.iter(|| stepper.step(&mut particles));
         });
+        let scene = gas(N, packing);
+        let mut yardstick = StraightforwardCellList::new(&scene);
+        let mut plain = scene.particles.clone();
+        for _ in 0..WARM_UP_STEPS {
+            yardstick.step(&mut plain);
+        }
+        group.bench_function(
+            BenchmarkId::new("straightforward_cell_list_step", packing),
+            |b| {
+                b.iter(|| yardstick.step(&mut plain));
+            },
+        );
         group.bench_function(BenchmarkId::new("broad_phase", packing), |b| {
             b.iter(|| stepper.find_contacts(&mut particles));
         });
