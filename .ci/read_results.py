@@ -3,6 +3,8 @@
 Usage: python3 .ci/read_results.py RESULTS_DIR
 """
 import glob
+import pathlib
+import re
 import sys
 
 import pyarrow.parquet as pq
@@ -23,7 +25,10 @@ missing = [c for c in REQUIRED if c not in table.column_names]
 assert not missing, f"missing columns: {missing}"
 rows = table.to_pylist()
 assert rows and all(r["status"] == "ok" for r in rows), "a run failed"
-assert all(r["schema_version"] == 1 for r in rows)
+# The version the collide that wrote them declares (src/records.rs).
+records_rs = pathlib.Path(__file__).resolve().parent.parent / "src" / "records.rs"
+version = int(re.search(r"pub const SCHEMA_VERSION: u32 = (\d+);", records_rs.read_text()).group(1))
+assert all(r["schema_version"] == version for r in rows), f"schema version is not {version}"
 hashes = {}
 for r in rows:
     hashes.setdefault(r["n"], set()).add(r["state_hash"])
