@@ -12,7 +12,7 @@ use crate::cli::{
 use crate::output::{write_atomically, write_state_csv};
 use crate::runner::{Calibration, RunOptions};
 use crate::scene_file;
-use crate::spec::{InjectedSlowdown, Method};
+use crate::spec::InjectedSlowdown;
 #[cfg(feature = "mpi")]
 use crate::summary::RunSummary;
 use crate::{
@@ -197,10 +197,10 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
 fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let backend = backend_spec(args)?;
     let mut spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
-    if spec.method.method == Method::Event && backend != BackendSpec::Serial {
+    if spec.method.method.may_be_event() && backend != BackendSpec::Serial {
         bail!(
-            "{}: the event method runs on the serial backend only; drop --backend {} \
-             (and --threads/--ranks), or use --method step",
+            "{}: the event method (which method auto may choose) runs on the serial backend \
+             only; drop --backend {} (and --threads/--ranks), or use --method step",
             args.scene.display(),
             args.backend.name()
         );
