@@ -72,6 +72,7 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         collapse_tc: None,
         temperature_curve: None,
         rms_step_over_radius: Some(0.1),
+        choice: None,
     }
 }
 
