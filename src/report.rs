@@ -167,6 +167,7 @@ fn warnings(out: &mut String, records: &[Record], setups: &[Setup]) {
         );
     }
     noise_warning(out, records, setups);
+    choice_note(out, records);
     let failed = records.iter().filter(|r| r.status != STATUS_OK).count();
     if failed > 0 {
         let _ = writeln!(
@@ -218,6 +219,23 @@ fn noise_warning(out: &mut String, records: &[Record], setups: &[Setup]) {
             "> **Warning: noisy measurements.** The 1-minute load average reached {busiest:.2} \
              on {cores} logical cores during the study.{spread} Medians resist some of this, \
              but speedups here are uncertain; re-run on a quiet machine to confirm them.\n"
+        );
+    }
+}
+
+/// Says what `method = "auto"` / `dt = "auto"` chose, once per scene and choice.
+fn choice_note(out: &mut String, records: &[Record]) {
+    let mut choices: Vec<(&str, &str)> = records
+        .iter()
+        .filter(|r| r.status == STATUS_OK && !r.choice.is_empty())
+        .map(|r| (r.scene.as_str(), r.choice.as_str()))
+        .collect();
+    choices.sort_unstable();
+    choices.dedup();
+    for (scene, choice) in choices {
+        let _ = writeln!(
+            out,
+            "> **Chosen automatically** for scene `{scene}` (`method`/`dt = \"auto\"`): {choice}.\n"
         );
     }
 }

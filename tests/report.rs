@@ -445,3 +445,18 @@ fn the_accuracy_report_tabulates_errors_and_draws_the_pareto_and_stability_figur
     // One run per setup: no scaling sections.
     assert!(!text.contains("Seconds per run"), "{text}");
 }
+
+#[test]
+fn the_report_says_what_method_and_dt_auto_chose() {
+    let mut records = records();
+    for record in &mut records {
+        record.choice = "method auto: event, cheaper".into();
+    }
+    let text = markdown(&records);
+    assert_eq!(
+        text.matches("> **Chosen automatically** for scene").count(),
+        1,
+        "once per scene and choice: {text}"
+    );
+    assert!(text.contains("method auto: event, cheaper"), "{text}");
+}
