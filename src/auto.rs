@@ -128,9 +128,7 @@ pub fn choose(
             } else {
                 "the smallest tried, still above"
             };
-            let note = format!(
-                "dt auto: v_max·dt = {fraction}·r_min, {verdict} the tolerance; ",
-            );
+            let note = format!("dt auto: v_max·dt = {fraction}·r_min, {verdict} the tolerance; ",);
             (fraction_dt(fraction), pilot, note)
         }
     };
@@ -217,7 +215,10 @@ fn largest_passing_fraction(scene: &Scene, spec: &MethodSpec) -> (f64, StepPilot
 
 /// The scene the pilots run: a random gas given by its packing with more than
 /// [`PILOT_DISKS`] disks is rebuilt with that many (same seed and settings).
-fn pilot_scene<'a>(source: &SceneSource, scene: &'a Scene) -> Result<Cow<'a, Scene>, PlacementError> {
+fn pilot_scene<'a>(
+    source: &SceneSource,
+    scene: &'a Scene,
+) -> Result<Cow<'a, Scene>, PlacementError> {
     match source {
         SceneSource::Gas(gas)
             if gas.n_particles > PILOT_DISKS && matches!(gas.extent, Extent::Packing(_)) =>

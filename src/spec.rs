@@ -5,8 +5,8 @@
 
 use serde::Deserialize;
 
-use crate::auto::choose;
 pub use crate::auto::DEFAULT_MISSED_TOLERANCE;
+use crate::auto::choose;
 pub use crate::sim::engine::Method;
 use crate::sim::event::EventParams;
 use crate::sim::scene::{GasSpec, PlacementError};

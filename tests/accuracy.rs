@@ -322,11 +322,17 @@ fn the_event_method_refuses_gravity_and_parallel_backends_with_clear_errors() {
         stderr.contains("falling.toml:4") && stderr.contains("scene.gravity"),
         "{stderr}"
     );
+    rayon_refuses("event");
+}
+
+/// `--method method` with the rayon backend is an input error: the event method (which
+/// `auto` may choose) is serial only.
+pub fn rayon_refuses(method: &str) {
     let out = run_collide(&[
         "simulate",
         "experiments/scenes/seed-1000.toml",
         "--method",
-        "event",
+        method,
         "--backend",
         "rayon",
         "--threads",

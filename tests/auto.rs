@@ -11,7 +11,7 @@ use collide::scene_file::{self, Overrides};
 use collide::spec::{Method, MethodChoice, Observe};
 use collide::summary::RunSummary;
 
-use crate::cli::collide as run_collide;
+use crate::accuracy::rayon_refuses;
 
 /// A periodic gas of 2000 unit disks (r = m = v_rms = 1) at `packing`, with `method` lines.
 fn gas(packing: f64, extra: &str) -> String {
@@ -61,7 +61,10 @@ fn method_auto_on_a_dilute_fast_gas_picks_what_the_cost_model_says() {
         "event"
     };
     assert_eq!(summary.method, expected, "{choice}");
-    assert_eq!(summary.method, "event", "a dilute gas favours events: {choice}");
+    assert_eq!(
+        summary.method, "event",
+        "a dilute gas favours events: {choice}"
+    );
 }
 
 #[test]
@@ -92,7 +95,10 @@ fn the_chosen_dt_keeps_the_missed_fraction_under_the_tolerance_on_a_fresh_run() 
     let missed = fresh.missed_collision_fraction.unwrap();
     assert!(missed <= 1e-3, "missed {missed}; {:?}", fresh.choice);
     // A looser tolerance allows a step at least as large.
-    let loose = run(&gas(0.3, "dt = \"auto\"\nmissed_tolerance = 0.05\n"), &Overrides::default());
+    let loose = run(
+        &gas(0.3, "dt = \"auto\"\nmissed_tolerance = 0.05\n"),
+        &Overrides::default(),
+    );
     assert!(loose.dt_auto_fraction.unwrap() >= fraction);
 }
 
@@ -135,7 +141,10 @@ fn dt_fraction_keeps_its_rule_and_explicit_choices_run_no_pilot() {
 #[test]
 fn bad_tolerances_are_input_errors_naming_the_line() {
     for bad in ["0", "1", "-1e-3", "2.0", "nan"] {
-        let text = gas(0.1, &format!("method = \"auto\"\nmissed_tolerance = {bad}\n"));
+        let text = gas(
+            0.1,
+            &format!("method = \"auto\"\nmissed_tolerance = {bad}\n"),
+        );
         let err = scene_file::parse(Path::new("auto.toml"), &text, &Overrides::default())
             .unwrap_err()
             .to_string();
@@ -144,16 +153,5 @@ fn bad_tolerances_are_input_errors_naming_the_line() {
             "{bad}: {err}"
         );
     }
-    let out = run_collide(&[
-        "simulate",
-        "experiments/scenes/seed-1000.toml",
-        "--method",
-        "auto",
-        "--backend",
-        "rayon",
-        "--threads",
-        "2",
-    ]);
-    assert_eq!(out.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("serial backend only"));
+    rayon_refuses("auto");
 }
