@@ -123,7 +123,15 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
             .iter()
             .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
             .collect();
-        Some(report::AccuracySection { groups, figures })
+        let cooling = accuracy::cooling(&records);
+        if !cooling.is_empty() {
+            accuracy_figures::draw_cooling(&cooling, &out)?;
+        }
+        Some(report::AccuracySection {
+            groups,
+            figures,
+            cooling,
+        })
     } else {
         None
     };

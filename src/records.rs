@@ -52,6 +52,7 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     (3, "rms_step_over_radius", Fill::F64(f64::NAN)),
     // Version 3 had no `method = "auto"` / tolerance-chosen dt.
     (4, "choice", Fill::Str("")),
+    (4, "temperature_curve", Fill::Str("")),
 ];
 
 /// What became of one run.
@@ -127,6 +128,9 @@ pub struct Record {
     /// What `method = "auto"` / `dt = "auto"` chose and why (the JSON summary's
     /// `choice`); empty when nothing was automatic.
     pub choice: String,
+    /// The JSON summary's `temperature_curve` as JSON text ([[t, T], ...]); empty where
+    /// it is null (elastic scenes, parallel backends).
+    pub temperature_curve: String,
     pub oversubscribed: bool,
     pub hostname: String,
     pub cpu_model: String,
@@ -213,6 +217,11 @@ impl Record {
         record.collapse_guard_fired = summary.collapse_guard_fired;
         record.rms_step_over_radius = nan(summary.rms_step_over_radius);
         record.choice = summary.choice.clone().unwrap_or_default();
+        record.temperature_curve = summary
+            .temperature_curve
+            .as_ref()
+            .and_then(|curve| serde_json::to_string(curve).ok())
+            .unwrap_or_default();
         record.oversubscribed = summary.oversubscribed;
         record
     }
@@ -284,6 +293,7 @@ impl Record {
             collapse_guard_fired: None,
             rms_step_over_radius: f64::NAN,
             choice: String::new(),
+            temperature_curve: String::new(),
             oversubscribed: threads * ranks > env.logical_cores as u64,
             hostname: env.hostname.clone(),
             cpu_model: env.cpu_model.clone(),
@@ -378,7 +388,7 @@ macro_rules! for_each_column {
             str: study, manifest_hash, build_id, config_key, scene, scaling, status, error, backend,
                  boundary, broadphase, state_hash, hostname, cpu_model, os, rustc, profile,
                  features, git_commit, mpi_library, study_started_utc, finished_utc, method,
-                 observe, choice;
+                 observe, choice, temperature_curve;
             u64: threads, ranks, workers, n, steps, pair_collisions, wall_collisions,
                  logical_cores, physical_cores, memory_bytes;
             u32: repetition;
