@@ -285,7 +285,7 @@ impl CoolingCurve {
 
     /// The curve deviates from Haff's law by more than [`HAFF_BREAKDOWN`].
     pub fn broke_down(&self) -> bool {
-        !(self.haff_deviation <= HAFF_BREAKDOWN)
+        self.haff_deviation.is_nan() || self.haff_deviation > HAFF_BREAKDOWN
     }
 }
 
@@ -349,12 +349,13 @@ pub fn cooling(records: &[Record]) -> Vec<CoolingCurve> {
 /// Least-squares t₀ of √(T₀/T) − 1 = t/t₀ over a curve (NaN if it does not cool).
 fn haff_t0(points: &[[f64; 2]]) -> f64 {
     let t_zero = points[0][1];
-    let (tt, ty) = points
-        .iter()
-        .filter(|p| p[1] > 0.0)
-        .fold((0.0, 0.0), |(tt, ty), &[t, temperature]| {
-            let y = (t_zero / temperature).sqrt() - 1.0;
-            (tt + t * t, ty + t * y)
-        });
+    let (tt, ty) =
+        points
+            .iter()
+            .filter(|p| p[1] > 0.0)
+            .fold((0.0, 0.0), |(tt, ty), &[t, temperature]| {
+                let y = (t_zero / temperature).sqrt() - 1.0;
+                (tt + t * t, ty + t * y)
+            });
     if ty > 0.0 { tt / ty } else { f64::NAN }
 }

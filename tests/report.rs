@@ -475,7 +475,10 @@ fn the_cooling_chart_compares_each_method_with_haffs_law_and_marks_breakdowns() 
         let points: Vec<[f64; 2]> = (0..=40)
             .map(|i| {
                 let t = 0.5 * i as f64;
-                [t, 0.5 * (1.0 + wobble * (i % 2) as f64) / (1.0 + rate * t / 10.0).powi(2)]
+                [
+                    t,
+                    0.5 * (1.0 + wobble * (i % 2) as f64) / (1.0 + rate * t / 10.0).powi(2),
+                ]
             })
             .collect();
         serde_json::to_string(&points).unwrap()
@@ -497,7 +500,11 @@ fn the_cooling_chart_compares_each_method_with_haffs_law_and_marks_breakdowns() 
     let curves = accuracy::cooling(&records);
     let methods: Vec<(&str, f64)> = curves.iter().map(|c| (c.method.as_str(), c.dt)).collect();
     assert_eq!(methods, [("event", 0.5), ("step", 0.5), ("step", 0.01)]);
-    assert!((curves[0].haff_t0 - 10.0).abs() < 1e-9, "{}", curves[0].haff_t0);
+    assert!(
+        (curves[0].haff_t0 - 10.0).abs() < 1e-9,
+        "{}",
+        curves[0].haff_t0
+    );
     assert!(curves[0].haff_deviation < 1e-12 && !curves[0].broke_down());
     assert!(curves[1].broke_down(), "{}", curves[1].haff_deviation);
     assert!(!curves[2].broke_down(), "{}", curves[2].haff_deviation);
@@ -505,7 +512,7 @@ fn the_cooling_chart_compares_each_method_with_haffs_law_and_marks_breakdowns() 
     let path = accuracy_figures::draw_cooling(&curves, dir.path()).unwrap();
     assert!(path.ends_with("accuracy-cooling.png"));
     let image = image::open(&path).unwrap().to_rgb8();
-    assert_eq!(image.dimensions(), (1000, 620));
+    assert_eq!(image.dimensions(), (1400, 620));
     let count = |rgb: [u8; 3]| image.pixels().filter(|p| p.0 == rgb).count();
     // Haff's law in black and the first two curves in the palette's blue and red.
     assert!(count([0, 0, 0]) > 1000, "Haff's law drawn");
@@ -523,7 +530,10 @@ fn the_cooling_chart_compares_each_method_with_haffs_law_and_marks_breakdowns() 
     let setups = analysis::analyse(&records).unwrap();
     let text = report::markdown(&records, &setups, "results/cooling/", &pictures);
     assert!(text.contains("## Cooling (e < 1)"), "{text}");
-    assert!(text.contains("![accuracy-cooling.png](accuracy-cooling.png)"), "{text}");
+    assert!(
+        text.contains("![accuracy-cooling.png](accuracy-cooling.png)"),
+        "{text}"
+    );
     // Only the large step's deviation is bold.
     assert_eq!(text.matches("%** |").count(), 1, "{text}");
 }
