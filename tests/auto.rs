@@ -116,6 +116,21 @@ fn the_choice_is_the_same_twice() {
 }
 
 #[test]
+fn dt_auto_chooses_the_same_dt_on_the_rayon_backend_and_ends_in_the_same_state() {
+    let text = gas(0.2, "dt = \"auto\"\n");
+    let overrides = Overrides {
+        steps: Some(20),
+        ..Overrides::default()
+    };
+    let spec = scene_file::parse(Path::new("auto.toml"), &text, &overrides).unwrap();
+    let serial = serial::run(&spec).unwrap().summary;
+    let two = std::num::NonZeroUsize::new(2).unwrap();
+    let rayon = collide::backend::threads::run(&spec, two).unwrap().summary;
+    assert_eq!((serial.dt, &serial.choice), (rayon.dt, &rayon.choice));
+    assert_eq!(serial.state_hash, rayon.state_hash);
+}
+
+#[test]
 fn dt_fraction_keeps_its_rule_and_explicit_choices_run_no_pilot() {
     let summary = run(
         &gas(0.2, "dt = \"auto\"\ndt_fraction = 0.1\n"),
