@@ -253,3 +253,109 @@ mod tests {
         assert!(coarse.failed() && !dense.steps[1].failed());
     }
 }
+
+/// A cooling curve deviating from Haff's law by more than this (relative, anywhere up to
+/// the end of the run) has broken down.
+pub const HAFF_BREAKDOWN: f64 = 0.05;
+
+/// One e < 1 run's cooling curve against Haff's law T₀/(1 + t/t₀)².
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoolingCurve {
+    pub method: String,
+    pub packing: f64,
+    pub dt: f64,
+    /// v_rms·dt/r_min at the start (NaN where not recorded).
+    pub step_over_radius: f64,
+    /// [t, T] from the record's `temperature_curve` (the first repetition: the runs are
+    /// seeded, so the repetitions' curves are the same).
+    pub points: Vec<[f64; 2]>,
+    /// Haff's t₀ at this packing, fitted to the event run's curve (see [`cooling`]).
+    pub haff_t0: f64,
+    /// Largest |T/T_Haff − 1| over the curve.
+    pub haff_deviation: f64,
+    /// The event method's TC guard count; `None` for the step method.
+    pub collapse_guard_fired: Option<u64>,
+}
+
+impl CoolingCurve {
+    /// T(t) under Haff's law from this curve's T₀.
+    pub fn haff(&self, t: f64) -> f64 {
+        self.points[0][1] / (1.0 + t / self.haff_t0).powi(2)
+    }
+
+    /// The curve deviates from Haff's law by more than [`HAFF_BREAKDOWN`].
+    pub fn broke_down(&self) -> bool {
+        self.haff_deviation.is_nan() || self.haff_deviation > HAFF_BREAKDOWN
+    }
+}
+
+/// The cooling curves of a study's successful e < 1 runs (records with a
+/// `temperature_curve`), one per packing, method and dt, ordered by packing, event first,
+/// then by decreasing dt. Haff's t₀ is fitted, per packing, to the event run's curve by
+/// least squares on √(T₀/T) − 1 = t/t₀ (the law's linear form); the restitution is not
+/// in the records, so the law is the event method's, and the curves of the step method
+/// are judged against it. Empty without curves, or at a packing without an event run.
+pub fn cooling(records: &[Record]) -> Vec<CoolingCurve> {
+    let mut runs: BTreeMap<(String, bool, String), &Record> = BTreeMap::new();
+    for record in records
+        .iter()
+        .filter(|r| r.status == STATUS_OK && !r.temperature_curve.is_empty())
+    {
+        let key = (
+            format!("{:.4}", record.packing),
+            record.method != "event",
+            format!("{:024.12}", 1.0 / record.dt),
+        );
+        runs.entry(key).or_insert(record);
+    }
+    let mut curves = Vec::new();
+    let (mut t0, mut packing) = (f64::NAN, String::new());
+    for ((packing_key, is_step, _), record) in runs {
+        if packing_key != packing {
+            (t0, packing) = (f64::NAN, packing_key);
+        }
+        let Ok(points) = serde_json::from_str::<Vec<[f64; 2]>>(&record.temperature_curve) else {
+            continue;
+        };
+        if points.len() < 2 || points[0][1] <= 0.0 {
+            continue;
+        }
+        if !is_step {
+            t0 = haff_t0(&points);
+        }
+        if t0.is_nan() {
+            continue;
+        }
+        let mut curve = CoolingCurve {
+            method: record.method.clone(),
+            packing: record.packing,
+            dt: record.dt,
+            step_over_radius: record.rms_step_over_radius,
+            points,
+            haff_t0: t0,
+            haff_deviation: 0.0,
+            collapse_guard_fired: record.collapse_guard_fired,
+        };
+        curve.haff_deviation = curve
+            .points
+            .iter()
+            .map(|&[t, temperature]| (temperature / curve.haff(t) - 1.0).abs())
+            .fold(0.0, f64::max);
+        curves.push(curve);
+    }
+    curves
+}
+
+/// Least-squares t₀ of √(T₀/T) − 1 = t/t₀ over a curve (NaN if it does not cool).
+fn haff_t0(points: &[[f64; 2]]) -> f64 {
+    let t_zero = points[0][1];
+    let (tt, ty) =
+        points
+            .iter()
+            .filter(|p| p[1] > 0.0)
+            .fold((0.0, 0.0), |(tt, ty), &[t, temperature]| {
+                let y = (t_zero / temperature).sqrt() - 1.0;
+                (tt + t * t, ty + t * y)
+            });
+    if ty > 0.0 { tt / ty } else { f64::NAN }
+}

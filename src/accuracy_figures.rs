@@ -1,6 +1,7 @@
 //! The accuracy study's figures (PNG, plotters, the fonts and palette of `figures`):
 //! speed against error with the Pareto front, and the stability map of v_rms·dt/r ×
-//! packing coloured by missed-collision fraction with the failure boundary.
+//! packing coloured by missed-collision fraction with the failure boundary; and for
+//! e < 1 the cooling curves against Haff's law.
 
 use std::path::{Path, PathBuf};
 
@@ -8,7 +9,9 @@ use anyhow::anyhow;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::accuracy::{AccuracyPoint, FAILURE_MISSED_FRACTION, PackingGroup, pareto_front};
+use crate::accuracy::{
+    AccuracyPoint, CoolingCurve, FAILURE_MISSED_FRACTION, PackingGroup, pareto_front,
+};
 use crate::figures::{FONT, PALETTE, draw_legend, register_font};
 
 /// File names of the two figures.
@@ -336,5 +339,137 @@ fn draw_stability(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
         )
         .map_err(|e| anyhow!("{e}"))?;
     root.present().map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}
+
+/// File name of the e < 1 cooling figure.
+pub const COOLING_FILE: &str = "accuracy-cooling.png";
+const COOLING_SIZE: (u32, u32) = (1400, 620);
+
+/// Draws T/T₀ against t/t₀ of every cooling curve (one panel per packing, one line per
+/// method and dt, dashed where it broke down) with Haff's law 1/(1 + t/t₀)² in black;
+/// returns its path.
+pub fn draw_cooling(curves: &[CoolingCurve], dir: &Path) -> anyhow::Result<PathBuf> {
+    register_font();
+    let path = dir.join(COOLING_FILE);
+    plot_cooling(curves, &path)?;
+    Ok(path)
+}
+
+fn plot_cooling(curves: &[CoolingCurve], path: &Path) -> anyhow::Result<()> {
+    let root = BitMapBackend::new(path, COOLING_SIZE).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let root = root
+        .titled(
+            "Cooling (e < 1): T/T₀ against t/t₀, Haff's law in black, broken-down runs dashed",
+            (FONT, 22),
+        )
+        .map_err(|e| anyhow!("{e}"))?;
+    // One panel per packing (curves arrive ordered by packing).
+    let mut packings: Vec<f64> = curves.iter().map(|c| c.packing).collect();
+    packings.dedup_by(|a, b| format!("{a:.4}") == format!("{b:.4}"));
+    let panels = root.split_evenly((1, packings.len().max(1)));
+    for (panel, &packing) in panels.iter().zip(&packings) {
+        let group: Vec<&CoolingCurve> = curves
+            .iter()
+            .filter(|c| format!("{:.4}", c.packing) == format!("{packing:.4}"))
+            .collect();
+        plot_cooling_panel(panel, packing, &group)?;
+    }
+    root.present().map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}
+
+/// Curve colours: the palette's first three (its fourth is near Haff's black), then
+/// orange, purple and brown (a packing has up to six runs).
+const COOLING_COLOURS: [RGBColor; 6] = [
+    PALETTE[0],
+    PALETTE[1],
+    PALETTE[2],
+    RGBColor(0xff, 0x7f, 0x0e),
+    RGBColor(0x94, 0x67, 0xbd),
+    RGBColor(0x8c, 0x56, 0x4b),
+];
+
+fn plot_cooling_panel(
+    panel: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    packing: f64,
+    curves: &[&CoolingCurve],
+) -> anyhow::Result<()> {
+    let scaled = |curve: &CoolingCurve| -> Vec<(f64, f64)> {
+        let t_zero = curve.points[0][1];
+        curve
+            .points
+            .iter()
+            .map(|&[t, temperature]| (t / curve.haff_t0, temperature / t_zero))
+            .filter(|&(x, y)| x.is_finite() && y.is_finite() && y > 0.0)
+            .collect()
+    };
+    let x_high = curves
+        .iter()
+        .flat_map(|c| scaled(c).into_iter().map(|(x, _)| x))
+        .fold(0.0_f64, f64::max)
+        .max(0.1);
+    let mut chart = ChartBuilder::on(panel)
+        .caption(format!("packing {packing:.2}"), (FONT, 18))
+        .margin(16)
+        .x_label_area_size(50)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..x_high * 1.02, 0.0..1.05_f64)
+        .map_err(|e| anyhow!("{e}"))?;
+    chart
+        .configure_mesh()
+        .x_desc("t / t₀ (Haff's t₀ fitted to the event run)")
+        .y_desc("T / T₀")
+        .axis_desc_style((FONT, 17))
+        .label_style((FONT, 14))
+        .light_line_style(BLACK.mix(0.04))
+        .y_label_formatter(&|y| format!("{y:.2}"))
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    let haff: Vec<(f64, f64)> = (0..=100)
+        .map(|i| {
+            let x = x_high * i as f64 / 100.0;
+            (x, 1.0 / (1.0 + x).powi(2))
+        })
+        .collect();
+    chart
+        .draw_series(LineSeries::new(haff, BLACK.stroke_width(3)))
+        .map_err(|e| anyhow!("{e}"))?
+        .label("Haff's law 1/(1 + t/t₀)²")
+        .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.stroke_width(3)));
+    for (index, curve) in curves.iter().enumerate() {
+        let colour = COOLING_COLOURS[index % COOLING_COLOURS.len()];
+        let points = scaled(curve);
+        let step = if curve.method == "event" {
+            "exact".to_owned()
+        } else {
+            format!("v_rms·dt/r = {:.3}", curve.step_over_radius)
+        };
+        let label = format!(
+            "{} ({step}): max |T/T_Haff − 1| = {:.1}%",
+            curve.method,
+            100.0 * curve.haff_deviation
+        );
+        let style = colour.stroke_width(2);
+        let legend = move |(x, y): (i32, i32)| PathElement::new([(x, y), (x + 20, y)], style);
+        if curve.broke_down() {
+            chart
+                .draw_series(DashedLineSeries::new(points.clone(), 8, 5, style))
+                .map_err(|e| anyhow!("{e}"))?
+                .label(label)
+                .legend(legend);
+        } else {
+            chart
+                .draw_series(LineSeries::new(points.clone(), style))
+                .map_err(|e| anyhow!("{e}"))?
+                .label(label)
+                .legend(legend);
+        }
+        chart
+            .draw_series(points.iter().map(|&p| Circle::new(p, 3, colour.filled())))
+            .map_err(|e| anyhow!("{e}"))?;
+    }
+    draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 13)?;
     Ok(())
 }

@@ -12,7 +12,7 @@ use crate::cli::{
 use crate::output::{write_atomically, write_state_csv};
 use crate::runner::{Calibration, RunOptions};
 use crate::scene_file;
-use crate::spec::{InjectedSlowdown, Method};
+use crate::spec::InjectedSlowdown;
 #[cfg(feature = "mpi")]
 use crate::summary::RunSummary;
 use crate::{
@@ -123,7 +123,15 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
             .iter()
             .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
             .collect();
-        Some(report::AccuracySection { groups, figures })
+        let cooling = accuracy::cooling(&records);
+        if !cooling.is_empty() {
+            accuracy_figures::draw_cooling(&cooling, &out)?;
+        }
+        Some(report::AccuracySection {
+            groups,
+            figures,
+            cooling,
+        })
     } else {
         None
     };
@@ -197,10 +205,10 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
 fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let backend = backend_spec(args)?;
     let mut spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
-    if spec.method.method == Method::Event && backend != BackendSpec::Serial {
+    if spec.method.method.may_be_event() && backend != BackendSpec::Serial {
         bail!(
-            "{}: the event method runs on the serial backend only; drop --backend {} \
-             (and --threads/--ranks), or use --method step",
+            "{}: the event method (which method auto may choose) runs on the serial backend \
+             only; drop --backend {} (and --threads/--ranks), or use --method step",
             args.scene.display(),
             args.backend.name()
         );

@@ -7,7 +7,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use crate::scene_file::{DtValue, Overrides};
 use crate::sim::Broadphase;
-use crate::spec::{Method, Observe};
+use crate::spec::{MethodChoice, Observe};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -184,10 +184,11 @@ pub struct OverrideArgs {
     /// Broad phase: grid (default) or allpairs (the seed's O(N²) search).
     #[arg(long, value_parser = parse_broadphase)]
     pub broadphase: Option<Broadphase>,
-    /// Method: step (time steps of dt, the default) or event (the exact event-driven
-    /// reference; serial backend only).
+    /// Method: step (time steps of dt, the default), event (the exact event-driven
+    /// reference; serial backend only) or auto (the cheaper one within the scene's
+    /// missed_tolerance; serial backend only).
     #[arg(long, value_parser = parse_method)]
-    pub method: Option<Method>,
+    pub method: Option<MethodChoice>,
     /// What to measure besides time: timing (default) or accuracy (also the step
     /// method's exact missed-collision count, outside `wall_s`; serial backend only).
     #[arg(long, value_parser = parse_observe)]
@@ -249,12 +250,8 @@ fn parse_broadphase(text: &str) -> Result<Broadphase, String> {
     }
 }
 
-fn parse_method(text: &str) -> Result<Method, String> {
-    match text {
-        "step" => Ok(Method::Step),
-        "event" => Ok(Method::Event),
-        _ => Err(format!("expected step or event, got \"{text}\"")),
-    }
+fn parse_method(text: &str) -> Result<MethodChoice, String> {
+    text.parse()
 }
 
 fn parse_observe(text: &str) -> Result<Observe, String> {

@@ -7,6 +7,7 @@ pub mod accuracy;
 pub mod accuracy_figures;
 pub mod analysis;
 pub mod app;
+pub mod auto;
 pub mod backend;
 pub mod calibrate;
 pub mod check;

@@ -15,7 +15,7 @@ use toml::Spanned;
 use crate::cli::BackendName;
 use crate::scene_file::{self, DtValue, Overrides};
 use crate::sim::Broadphase;
-use crate::spec::{Method, Observe, RunSpec, SceneSource};
+use crate::spec::{MethodChoice, Observe, RunSpec, SceneSource};
 
 /// A validated study: what to run, how often, and in which order.
 #[derive(Clone, Debug, PartialEq)]
@@ -186,7 +186,7 @@ struct RawSweep {
     steps: Option<Spanned<Vec<i64>>>,
     seed: Option<Spanned<Vec<u64>>>,
     broadphase: Option<Spanned<Vec<Broadphase>>>,
-    method: Option<Spanned<Vec<Method>>>,
+    method: Option<Spanned<Vec<MethodChoice>>>,
     observe: Option<Spanned<Vec<Observe>>>,
     /// Keys whose lists pair up element by element instead of multiplying.
     zip: Option<Spanned<Vec<String>>>,
@@ -301,7 +301,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Study, ManifestError> {
                         format!("scene `{scene}` with {}: {message}", describe(&overrides)),
                     )
                 })?;
-                if spec.method.method == Method::Event && backend != BackendName::Serial {
+                if spec.method.method.may_be_event() && backend != BackendName::Serial {
                     let at = raw
                         .sweep
                         .method
@@ -404,7 +404,7 @@ fn sweep_points(sweep: &RawSweep) -> Result<Vec<Overrides>, (usize, String)> {
     list!("steps", steps, |v: i64| v);
     list!("seed", seed, |v: u64| v);
     list!("broadphase", broadphase, |v: Broadphase| v);
-    list!("method", method, |v: Method| v);
+    list!("method", method, |v: MethodChoice| v);
     list!("observe", observe, |v: Observe| v);
     for (key, offset, len, _) in &lists {
         if *len == 0 {
@@ -558,6 +558,7 @@ fn line_of(text: &str, offset: usize) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::spec::Method;
 
     const INLINE: &str = "[[scenes]]\nname = \"gas\"\n[scenes.scene]\nn = 100\npacking = 0.1\n\
                           [scenes.method]\ndt = 0.1\nsteps = 10\n";
@@ -618,17 +619,20 @@ mod tests {
         let swept = study(
             "[sweep]\nmethod = [\"step\", \"event\"]\nobserve = [\"timing\", \"accuracy\"]\n[backends]\nserial = true\n",
         );
-        let pairs: Vec<(Option<Method>, Option<Observe>)> = swept
+        let pairs: Vec<(Option<MethodChoice>, Option<Observe>)> = swept
             .configurations
             .iter()
             .map(|c| (c.overrides.method, c.overrides.observe))
             .collect();
         assert_eq!(pairs.len(), 4);
-        assert!(pairs.contains(&(Some(Method::Event), Some(Observe::Accuracy))));
+        assert!(pairs.contains(&(
+            Some(MethodChoice::Fixed(Method::Event)),
+            Some(Observe::Accuracy)
+        )));
         let event = swept
             .configurations
             .iter()
-            .find(|c| c.overrides.method == Some(Method::Event))
+            .find(|c| c.overrides.method == Some(MethodChoice::Fixed(Method::Event)))
             .unwrap();
         let args = event.simulate_args();
         assert!(

@@ -14,7 +14,7 @@ use crate::manifest::Scaling;
 use crate::output::write_atomically;
 use crate::summary::RunSummary;
 
-pub const SCHEMA_VERSION: u32 = 3;
+pub const SCHEMA_VERSION: u32 = 4;
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
 const OLDEST_READABLE_VERSION: u32 = 1;
 
@@ -50,6 +50,9 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     // how far the rms disk moves per step.
     (3, "cpu_s", Fill::F64(f64::NAN)),
     (3, "rms_step_over_radius", Fill::F64(f64::NAN)),
+    // Version 3 had no `method = "auto"` / tolerance-chosen dt.
+    (4, "choice", Fill::Str("")),
+    (4, "temperature_curve", Fill::Str("")),
 ];
 
 /// What became of one run.
@@ -122,6 +125,12 @@ pub struct Record {
     pub collapse_guard_fired: Option<u64>,
     /// v_rms·dt/r_min at the start (see the JSON summary); NaN where not known.
     pub rms_step_over_radius: f64,
+    /// What `method = "auto"` / `dt = "auto"` chose and why (the JSON summary's
+    /// `choice`); empty when nothing was automatic.
+    pub choice: String,
+    /// The JSON summary's `temperature_curve` as JSON text ([[t, T], ...]); empty where
+    /// it is null (elastic scenes, parallel backends).
+    pub temperature_curve: String,
     pub oversubscribed: bool,
     pub hostname: String,
     pub cpu_model: String,
@@ -207,6 +216,12 @@ impl Record {
         record.energy_relative_error = nan(summary.energy_relative_error);
         record.collapse_guard_fired = summary.collapse_guard_fired;
         record.rms_step_over_radius = nan(summary.rms_step_over_radius);
+        record.choice = summary.choice.clone().unwrap_or_default();
+        record.temperature_curve = summary
+            .temperature_curve
+            .as_ref()
+            .and_then(|curve| serde_json::to_string(curve).ok())
+            .unwrap_or_default();
         record.oversubscribed = summary.oversubscribed;
         record
     }
@@ -277,6 +292,8 @@ impl Record {
             energy_relative_error: f64::NAN,
             collapse_guard_fired: None,
             rms_step_over_radius: f64::NAN,
+            choice: String::new(),
+            temperature_curve: String::new(),
             oversubscribed: threads * ranks > env.logical_cores as u64,
             hostname: env.hostname.clone(),
             cpu_model: env.cpu_model.clone(),
@@ -371,7 +388,7 @@ macro_rules! for_each_column {
             str: study, manifest_hash, build_id, config_key, scene, scaling, status, error, backend,
                  boundary, broadphase, state_hash, hostname, cpu_model, os, rustc, profile,
                  features, git_commit, mpi_library, study_started_utc, finished_utc, method,
-                 observe;
+                 observe, choice, temperature_curve;
             u64: threads, ranks, workers, n, steps, pair_collisions, wall_collisions,
                  logical_cores, physical_cores, memory_bytes;
             u32: repetition;

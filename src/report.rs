@@ -4,7 +4,10 @@
 
 use std::fmt::Write as _;
 
-use crate::accuracy::{AccuracyPoint, FAILURE_MISSED_FRACTION, PackingGroup};
+use crate::accuracy::{
+    AccuracyPoint, CoolingCurve, FAILURE_MISSED_FRACTION, HAFF_BREAKDOWN, PackingGroup,
+};
+use crate::accuracy_figures::COOLING_FILE;
 use crate::analysis::{Baseline, Setup};
 use crate::figures::Figure;
 use crate::manifest::Scaling;
@@ -37,6 +40,9 @@ pub struct AccuracySection {
     pub groups: Vec<PackingGroup>,
     /// The speed-vs-accuracy and stability figures.
     pub figures: Vec<String>,
+    /// The e < 1 runs' cooling curves (empty for elastic studies); drawn as
+    /// [`COOLING_FILE`] beside the report.
+    pub cooling: Vec<CoolingCurve>,
 }
 
 /// The report of one study's records, analysed into `setups` ([`crate::analysis::analyse`]);
@@ -167,6 +173,7 @@ fn warnings(out: &mut String, records: &[Record], setups: &[Setup]) {
         );
     }
     noise_warning(out, records, setups);
+    choice_note(out, records);
     let failed = records.iter().filter(|r| r.status != STATUS_OK).count();
     if failed > 0 {
         let _ = writeln!(
@@ -218,6 +225,23 @@ fn noise_warning(out: &mut String, records: &[Record], setups: &[Setup]) {
             "> **Warning: noisy measurements.** The 1-minute load average reached {busiest:.2} \
              on {cores} logical cores during the study.{spread} Medians resist some of this, \
              but speedups here are uncertain; re-run on a quiet machine to confirm them.\n"
+        );
+    }
+}
+
+/// Says what `method = "auto"` / `dt = "auto"` chose, once per scene and choice.
+fn choice_note(out: &mut String, records: &[Record]) {
+    let mut choices: Vec<(&str, &str)> = records
+        .iter()
+        .filter(|r| r.status == STATUS_OK && !r.choice.is_empty())
+        .map(|r| (r.scene.as_str(), r.choice.as_str()))
+        .collect();
+    choices.sort_unstable();
+    choices.dedup();
+    for (scene, choice) in choices {
+        let _ = writeln!(
+            out,
+            "> **Chosen automatically** for scene `{scene}` (`method`/`dt = \"auto\"`): {choice}.\n"
         );
     }
 }
@@ -528,4 +552,49 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
     for figure in &section.figures {
         let _ = writeln!(out, "![{figure}]({figure})\n");
     }
+    if !section.cooling.is_empty() {
+        cooling_section(out, &section.cooling);
+    }
+}
+
+/// The e < 1 runs against Haff's law: a table, and the cooling figure.
+fn cooling_section(out: &mut String, curves: &[CoolingCurve]) {
+    let _ = writeln!(
+        out,
+        "## Cooling (e < 1): energy against time and Haff's law\n\n\
+         T = kinetic energy per disk, sampled at 40 steps. Haff's law T₀/(1 + t/t₀)² with \
+         t₀ fitted to the event run of each packing (least squares on √(T₀/T) − 1 = t/t₀); a \
+         run breaks down (**bold**) where its T departs from the law by more than {:.0}%.\n",
+        100.0 * HAFF_BREAKDOWN
+    );
+    let _ = writeln!(
+        out,
+        "| packing | method | dt | v_rms·dt/r | t_end/t₀ | T_end/T₀ | Haff's T_end/T₀ | max deviation from Haff | TC guard fired |\n\
+         | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+    );
+    for curve in curves {
+        let [t_end, temperature_end] = curve.points[curve.points.len() - 1];
+        let t_zero = curve.points[0][1];
+        let deviation = format!("{:.2}%", 100.0 * curve.haff_deviation);
+        let deviation = if curve.broke_down() {
+            format!("**{deviation}**")
+        } else {
+            deviation
+        };
+        let _ = writeln!(
+            out,
+            "| {:.2} | {} | {} | {:.3} | {:.3} | {:.4} | {:.4} | {deviation} | {} |",
+            curve.packing,
+            curve.method,
+            curve.dt,
+            curve.step_over_radius,
+            t_end / curve.haff_t0,
+            temperature_end / t_zero,
+            curve.haff(t_end) / t_zero,
+            curve
+                .collapse_guard_fired
+                .map_or_else(|| "—".to_owned(), |n| n.to_string()),
+        );
+    }
+    let _ = writeln!(out, "\n![{COOLING_FILE}]({COOLING_FILE})\n");
 }

@@ -16,8 +16,8 @@ use crate::sim::scene::{
 };
 use crate::sim::{Boundary, Broadphase, Disk, Domain, Particles, Physics, Scene};
 use crate::spec::{
-    DEFAULT_DT_FRACTION, DtChoice, InjectedSlowdown, Method, MethodSpec, Observe, RunSpec,
-    SceneSource,
+    DEFAULT_DT_FRACTION, DEFAULT_MISSED_TOLERANCE, DtChoice, InjectedSlowdown, Method,
+    MethodChoice, MethodSpec, Observe, RunSpec, SceneSource,
 };
 
 /// Values given on the command line that replace the scene file's.
@@ -29,7 +29,7 @@ pub struct Overrides {
     pub dt: Option<DtValue>,
     pub packing: Option<f64>,
     pub broadphase: Option<Broadphase>,
-    pub method: Option<Method>,
+    pub method: Option<MethodChoice>,
     pub observe: Option<Observe>,
 }
 
@@ -165,7 +165,8 @@ struct RawMethod {
     dt_fraction: Option<Spanned<f64>>,
     steps: Option<Spanned<i64>>,
     broadphase: Option<Spanned<Broadphase>>,
-    method: Option<Spanned<Method>>,
+    method: Option<Spanned<MethodChoice>>,
+    missed_tolerance: Option<Spanned<f64>>,
     tc: Option<Spanned<f64>>,
     observe: Option<Spanned<Observe>>,
 }
@@ -237,7 +238,27 @@ impl Validator<'_> {
     }
 
     fn method(&self, raw: &RawMethod, overrides: &Overrides) -> Result<MethodSpec, SceneFileError> {
-        let fraction = match self.in_file(&raw.dt_fraction) {
+        let method = self
+            .pick("--method", overrides.method, &raw.method, |m| *m)
+            .map_or(MethodChoice::Fixed(Method::Step), |sourced| sourced.value);
+        let missed_tolerance = match self.in_file(&raw.missed_tolerance) {
+            Some(Sourced { value, origin }) if !(value > 0.0 && value < 1.0) => {
+                return Err(self.invalid(
+                    origin,
+                    "method.missed_tolerance",
+                    format!("is {value}, outside (0, 1)"),
+                    "give the largest fraction of missed collisions method = \"auto\" and \
+                     dt = \"auto\" may accept, e.g. missed_tolerance = 1e-3",
+                ));
+            }
+            sourced => sourced.map_or(DEFAULT_MISSED_TOLERANCE, |s| s.value),
+        };
+        // dt = "auto" follows the dt_fraction rule where dt_fraction is given, else the
+        // tolerance; an absent dt is the dt_fraction rule unless the method is auto.
+        let tolerance_or = |fraction: Option<f64>| {
+            fraction.map_or(DtChoice::Tolerance, |fraction| DtChoice::Auto { fraction })
+        };
+        let explicit_fraction = match self.in_file(&raw.dt_fraction) {
             Some(Sourced { value, origin }) => {
                 if !(value > 0.0 && value <= 1.0) {
                     return Err(self.invalid(
@@ -247,14 +268,17 @@ impl Validator<'_> {
                         "give the largest step as a fraction of the smallest radius, e.g. dt_fraction = 0.1",
                     ));
                 }
-                value
+                Some(value)
             }
-            None => DEFAULT_DT_FRACTION,
+            None => None,
         };
         let dt = match self.pick("--dt", overrides.dt.clone(), &raw.dt, Clone::clone) {
-            None => DtChoice::Auto { fraction },
+            None if method == MethodChoice::Auto => tolerance_or(explicit_fraction),
+            None => DtChoice::Auto {
+                fraction: explicit_fraction.unwrap_or(DEFAULT_DT_FRACTION),
+            },
             Some(Sourced { value, origin }) => match value {
-                DtValue::Word(word) if word == "auto" => DtChoice::Auto { fraction },
+                DtValue::Word(word) if word == "auto" => tolerance_or(explicit_fraction),
                 DtValue::Seconds(dt) if dt > 0.0 && dt.is_finite() => DtChoice::Fixed(dt),
                 DtValue::Seconds(dt) => {
                     return Err(self.invalid(
@@ -286,9 +310,6 @@ impl Validator<'_> {
                 *b
             })
             .map_or(Broadphase::Grid, |sourced| sourced.value);
-        let method = self
-            .pick("--method", overrides.method, &raw.method, |m| *m)
-            .map_or(Method::Step, |sourced| sourced.value);
         let observe = self
             .pick("--observe", overrides.observe, &raw.observe, |o| *o)
             .map_or(Observe::Timing, |sourced| sourced.value);
@@ -308,6 +329,7 @@ impl Validator<'_> {
             steps,
             broadphase,
             method,
+            missed_tolerance,
             tc,
             observe,
         })
@@ -325,7 +347,7 @@ impl Validator<'_> {
             SceneSource::Gas(gas) => gas.physics,
             SceneSource::Explicit(scene) => scene.physics,
         };
-        if method.method == Method::Event && physics.gravity.is_some() {
+        if method.method == MethodChoice::Fixed(Method::Event) && physics.gravity.is_some() {
             let origin = self
                 .in_file(&raw.scene.gravity)
                 .map_or(Origin::Default, |s| s.origin);

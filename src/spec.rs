@@ -5,10 +5,12 @@
 
 use serde::Deserialize;
 
+pub use crate::auto::DEFAULT_MISSED_TOLERANCE;
+use crate::auto::choose;
 pub use crate::sim::engine::Method;
 use crate::sim::event::EventParams;
 use crate::sim::scene::{GasSpec, PlacementError};
-use crate::sim::step::{StepParams, auto_dt};
+use crate::sim::step::StepParams;
 use crate::sim::{Broadphase, Scene};
 
 /// Where the disks come from.
@@ -28,6 +30,53 @@ pub enum DtChoice {
     Auto {
         fraction: f64,
     },
+    /// The largest dt whose pilot misses at most `missed_tolerance` of its collisions
+    /// (`dt = "auto"` without `dt_fraction`; see `crate::auto`).
+    Tolerance,
+}
+
+/// The method as asked for: one of them, or the cheapest within the tolerance.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(try_from = "String")]
+pub enum MethodChoice {
+    Fixed(Method),
+    /// `method = "auto"`: chosen by `crate::auto::choose`.
+    Auto,
+}
+
+impl MethodChoice {
+    pub fn name(self) -> &'static str {
+        match self {
+            MethodChoice::Fixed(method) => method.name(),
+            MethodChoice::Auto => "auto",
+        }
+    }
+
+    /// The event method (serial backend only) is or may be chosen.
+    pub fn may_be_event(self) -> bool {
+        self != MethodChoice::Fixed(Method::Step)
+    }
+}
+
+impl std::str::FromStr for MethodChoice {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<MethodChoice, String> {
+        match text {
+            "step" => Ok(MethodChoice::Fixed(Method::Step)),
+            "event" => Ok(MethodChoice::Fixed(Method::Event)),
+            "auto" => Ok(MethodChoice::Auto),
+            _ => Err(format!("expected step, event or auto, got \"{text}\"")),
+        }
+    }
+}
+
+impl TryFrom<String> for MethodChoice {
+    type Error = String;
+
+    fn try_from(text: String) -> Result<MethodChoice, String> {
+        text.parse()
+    }
 }
 
 /// Default of `dt_fraction`: the fastest disk moves at most a tenth of the smallest radius per step.
@@ -64,7 +113,9 @@ pub struct MethodSpec {
     /// Number of steps, at least 1.
     pub steps: u64,
     pub broadphase: Broadphase,
-    pub method: Method,
+    pub method: MethodChoice,
+    /// Largest missed-collision fraction `method = "auto"` and `dt = "auto"` accept, in (0, 1).
+    pub missed_tolerance: f64,
     /// TC model time of the event method (≥ 0); `None`: [`DEFAULT_TC_FRACTION`] of r_min / v_rms.
     pub tc: Option<f64>,
     pub observe: Observe,
@@ -77,7 +128,8 @@ impl MethodSpec {
             dt: DtChoice::Fixed(dt),
             steps,
             broadphase,
-            method: Method::Step,
+            method: MethodChoice::Fixed(Method::Step),
+            missed_tolerance: DEFAULT_MISSED_TOLERANCE,
             tc: None,
             observe: Observe::Timing,
         }
@@ -122,6 +174,8 @@ pub struct PreparedRun {
     pub steps: u64,
     /// `Some(fraction)` when dt was chosen automatically.
     pub dt_auto_fraction: Option<f64>,
+    /// What `method = "auto"` or `dt = "auto"` chose and why; `None` when nothing was.
+    pub choice: Option<String>,
     pub seed: Option<u64>,
     pub method: Method,
     /// The event method's settings (its TC time resolved); unused by the step method.
@@ -130,35 +184,32 @@ pub struct PreparedRun {
 }
 
 impl RunSpec {
-    /// Builds the initial disks (placing a random gas) and resolves the time step.
+    /// Builds the initial disks (placing a random gas) and resolves the method and time
+    /// step (running the pilots of `crate::auto` when either is "auto").
     pub fn prepare(&self) -> Result<PreparedRun, PlacementError> {
         let (scene, seed) = match &self.scene {
             SceneSource::Gas(gas) => (gas.build()?, Some(gas.seed)),
             SceneSource::Explicit(scene) => (scene.clone(), None),
-        };
-        let (dt, dt_auto_fraction) = match self.method.dt {
-            DtChoice::Fixed(dt) => (dt, None),
-            DtChoice::Auto { fraction } => (
-                auto_dt(&scene.particles, &scene.domain, &scene.physics, fraction),
-                Some(fraction),
-            ),
         };
         let tc = self.method.tc.unwrap_or_else(|| {
             let rms = scene.particles.rms_speed();
             let speed = if rms > 0.0 { rms } else { 1.0 };
             DEFAULT_TC_FRACTION * scene.particles.min_radius() / speed
         });
+        let event = EventParams { tc };
+        let choice = choose(&self.scene, &scene, &self.method, event)?;
         Ok(PreparedRun {
             scene,
             params: StepParams {
-                dt,
+                dt: choice.dt,
                 broadphase: self.method.broadphase,
             },
             steps: self.method.steps,
-            dt_auto_fraction,
+            dt_auto_fraction: choice.dt_auto_fraction,
+            choice: choice.reason,
             seed,
-            method: self.method.method,
-            event: EventParams { tc },
+            method: choice.method,
+            event,
             observe: self.method.observe,
         })
     }

@@ -118,6 +118,11 @@ pub struct RunSummary {
     /// radii (the accuracy study's x axis); null for a state at rest.
     #[serde(default)]
     pub rms_step_over_radius: Option<f64>,
+    /// What `method = "auto"` or `dt = "auto"` (under `missed_tolerance`) chose and why:
+    /// the pilots' missed fractions and the cost model's estimates; null when neither
+    /// was automatic (or dt came from the dt_fraction rule with a fixed method).
+    #[serde(default)]
+    pub choice: Option<String>,
 }
 
 fn default_method() -> String {
@@ -225,6 +230,9 @@ impl fmt::Display for RunSummary {
                 "collapse   TC guard fired {guard} times (tc = {})",
                 show(self.collapse_tc)
             )?;
+        }
+        if let Some(choice) = &self.choice {
+            writeln!(f, "chosen     {choice}")?;
         }
         write!(f, "state hash {}", self.state_hash)
     }

@@ -13,7 +13,7 @@ use collide::scene_file::{self, Overrides};
 use collide::sim::event::{EventParams, EventSim};
 use collide::sim::scene::{GasSpec, Placement};
 use collide::sim::{Boundary, Particles, Physics, Scene};
-use collide::spec::{Method, Observe};
+use collide::spec::{Method, MethodChoice, Observe};
 
 use crate::cli::{collide as run_collide, json_summary, scene_file as write_scene};
 
@@ -209,7 +209,7 @@ fn a_perfectly_inelastic_dense_gas_runs_to_the_end() {
 
 fn run_scene_text(text: &str, method: Method, observe: Observe) -> collide::summary::RunSummary {
     let overrides = Overrides {
-        method: Some(method),
+        method: Some(MethodChoice::Fixed(method)),
         observe: Some(observe),
         ..Overrides::default()
     };
@@ -223,7 +223,7 @@ fn two_disks_head_on_meet_at_the_exact_time_with_the_exact_velocities() {
     // t = 12 the disks are at 49 − 3 = 46 and 51 + 3 = 54.
     let text = std::fs::read_to_string("experiments/scenes/two-disks-head-on.toml").unwrap();
     let overrides = Overrides {
-        method: Some(Method::Event),
+        method: Some(MethodChoice::Fixed(Method::Event)),
         ..Overrides::default()
     };
     let spec = scene_file::parse(Path::new("head-on.toml"), &text, &overrides).unwrap();
@@ -322,11 +322,17 @@ fn the_event_method_refuses_gravity_and_parallel_backends_with_clear_errors() {
         stderr.contains("falling.toml:4") && stderr.contains("scene.gravity"),
         "{stderr}"
     );
+    rayon_refuses("event");
+}
+
+/// `--method method` with the rayon backend is an input error: the event method (which
+/// `auto` may choose) is serial only.
+pub fn rayon_refuses(method: &str) {
     let out = run_collide(&[
         "simulate",
         "experiments/scenes/seed-1000.toml",
         "--method",
-        "event",
+        method,
         "--backend",
         "rayon",
         "--threads",

@@ -109,7 +109,10 @@ fn overrides_replace_scene_values() {
     assert_eq!(json["steps"], 10);
     assert_eq!(json["seed"], 9);
     assert!((json["packing"].as_f64().unwrap() - 0.2).abs() < 1e-12);
-    assert_eq!(json["dt_auto_fraction"], 0.1);
+    // `--dt auto` without dt_fraction: the largest rung 4·2^-k within missed_tolerance.
+    let fraction = json["dt_auto_fraction"].as_f64().unwrap();
+    assert_eq!(fraction.log2().fract(), 0.0, "{fraction}");
+    assert!(json["choice"].as_str().unwrap().contains("dt auto"));
 }
 
 #[test]

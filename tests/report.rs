@@ -72,6 +72,7 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         collapse_tc: None,
         temperature_curve: None,
         rms_step_over_radius: Some(0.1),
+        choice: None,
     }
 }
 
@@ -421,6 +422,7 @@ fn the_accuracy_report_tabulates_errors_and_draws_the_pareto_and_stability_figur
                 "accuracy-pareto.png".into(),
                 "accuracy-stability.png".into(),
             ],
+            cooling: Vec::new(),
         }),
         ..Default::default()
     };
@@ -443,4 +445,95 @@ fn the_accuracy_report_tabulates_errors_and_draws_the_pareto_and_stability_figur
     assert!(text.contains("![accuracy-stability.png](accuracy-stability.png)"));
     // One run per setup: no scaling sections.
     assert!(!text.contains("Seconds per run"), "{text}");
+}
+
+#[test]
+fn the_report_says_what_method_and_dt_auto_chose() {
+    let mut records = records();
+    for record in &mut records {
+        record.choice = "method auto: event, cheaper".into();
+    }
+    let text = markdown(&records);
+    assert_eq!(
+        text.matches("> **Chosen automatically** for scene").count(),
+        1,
+        "once per scene and choice: {text}"
+    );
+    assert!(text.contains("method auto: event, cheaper"), "{text}");
+}
+
+#[test]
+fn the_cooling_chart_compares_each_method_with_haffs_law_and_marks_breakdowns() {
+    use collide::{accuracy, accuracy_figures};
+    let template = records()
+        .into_iter()
+        .find(|r| r.backend == "serial")
+        .unwrap();
+    // The event run follows Haff's law with t₀ = 10 exactly; the small step within 1%;
+    // the large step loses energy twice as fast (T₀/(1 + 2t/t₀)²): a breakdown.
+    let curve = |rate: f64, wobble: f64| {
+        let points: Vec<[f64; 2]> = (0..=40)
+            .map(|i| {
+                let t = 0.5 * i as f64;
+                [
+                    t,
+                    0.5 * (1.0 + wobble * (i % 2) as f64) / (1.0 + rate * t / 10.0).powi(2),
+                ]
+            })
+            .collect();
+        serde_json::to_string(&points).unwrap()
+    };
+    let mut records = Vec::new();
+    for (method, dt, text) in [
+        ("step", 0.5, curve(2.0, 0.0)),
+        ("event", 0.5, curve(1.0, 0.0)),
+        ("step", 0.01, curve(1.0, 0.01)),
+    ] {
+        let mut record = template.clone();
+        record.method = method.into();
+        record.dt = dt;
+        record.packing = 0.1;
+        record.rms_step_over_radius = dt;
+        record.temperature_curve = text;
+        records.push(record);
+    }
+    let curves = accuracy::cooling(&records);
+    let methods: Vec<(&str, f64)> = curves.iter().map(|c| (c.method.as_str(), c.dt)).collect();
+    assert_eq!(methods, [("event", 0.5), ("step", 0.5), ("step", 0.01)]);
+    assert!(
+        (curves[0].haff_t0 - 10.0).abs() < 1e-9,
+        "{}",
+        curves[0].haff_t0
+    );
+    assert!(curves[0].haff_deviation < 1e-12 && !curves[0].broke_down());
+    assert!(curves[1].broke_down(), "{}", curves[1].haff_deviation);
+    assert!(!curves[2].broke_down(), "{}", curves[2].haff_deviation);
+    let dir = tempfile::tempdir().unwrap();
+    let path = accuracy_figures::draw_cooling(&curves, dir.path()).unwrap();
+    assert!(path.ends_with("accuracy-cooling.png"));
+    let image = image::open(&path).unwrap().to_rgb8();
+    assert_eq!(image.dimensions(), (1400, 620));
+    let count = |rgb: [u8; 3]| image.pixels().filter(|p| p.0 == rgb).count();
+    // Haff's law in black and the first two curves in the palette's blue and red.
+    assert!(count([0, 0, 0]) > 1000, "Haff's law drawn");
+    assert!(count([0x1f, 0x77, 0xb4]) > 200 && count([0xd6, 0x27, 0x28]) > 100);
+    let section = report::AccuracySection {
+        groups: accuracy::analyse(&records),
+        figures: Vec::new(),
+        cooling: curves,
+    };
+    let pictures = report::Pictures {
+        figures: Vec::new(),
+        scene: None,
+        accuracy: Some(section),
+    };
+    let setups = analysis::analyse(&records).unwrap();
+    let text = report::markdown(&records, &setups, "results/cooling/", &pictures);
+    assert!(text.contains("## Cooling (e < 1)"), "{text}");
+    assert!(
+        text.contains("![accuracy-cooling.png](accuracy-cooling.png)"),
+        "{text}"
+    );
+    // Only the large step's deviation is bold.
+    assert_eq!(text.matches("%** |").count(), 1, "{text}");
 }

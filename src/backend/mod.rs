@@ -343,5 +343,6 @@ pub fn summarize(
             let step = scene.particles.rms_speed() * prepared.params.dt;
             (step > 0.0).then(|| step / scene.particles.min_radius())
         },
+        choice: prepared.choice.clone(),
     }
 }

@@ -9,6 +9,7 @@ pub mod event;
 pub mod grid;
 pub mod observe;
 pub mod particles;
+pub mod pilot;
 pub mod scene;
 pub mod schedule;
 pub mod step;
