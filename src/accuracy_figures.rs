@@ -39,15 +39,26 @@ fn plotted(error: f64) -> f64 {
     error.abs().max(ERROR_FLOOR)
 }
 
-fn draw_pareto(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
-    let root = BitMapBackend::new(path, PARETO_SIZE).into_drawing_area();
+/// A white PNG canvas of `size` at `path` with `title` across its top; the area below.
+fn titled_canvas<'a>(
+    path: &'a Path,
+    size: (u32, u32),
+    title: &str,
+    title_size: u32,
+) -> anyhow::Result<DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>> {
+    let root = BitMapBackend::new(path, size).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
-    let root = root
-        .titled(
-            "Speed against accuracy: step method (points, large dt on the left) and event reference (dashed)",
-            (FONT, 22),
-        )
-        .map_err(|e| anyhow!("{e}"))?;
+    root.titled(title, (FONT, title_size))
+        .map_err(|e| anyhow!("{e}"))
+}
+
+fn draw_pareto(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
+    let root = titled_canvas(
+        path,
+        PARETO_SIZE,
+        "Speed against accuracy: step method (points, large dt on the left) and event reference (dashed)",
+        22,
+    )?;
     let panels = root.split_evenly((1, 2));
     let errors: [(&str, ErrorOf); 2] = [
         ("missed-collision fraction", |p| p.missed_fraction),
@@ -234,16 +245,14 @@ fn draw_stability(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
     columns.dedup_by(|a, b| (*a / *b - 1.0).abs() < 0.02);
     let column_of = |x: f64| columns.iter().position(|c| (x / c - 1.0).abs() < 0.02);
     let (nx, ny) = (columns.len().max(1), groups.len().max(1));
-    let root = BitMapBackend::new(path, STABILITY_SIZE).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
-    let root = root
-        .titled(
-            &format!(
-                "Stability map of the step method: missed-collision fraction (m) and max overlap (ov); black line: m = {FAILURE_MISSED_FRACTION:e}"
-            ),
-            (FONT, 19),
-        )
-        .map_err(|e| anyhow!("{e}"))?;
+    let root = titled_canvas(
+        path,
+        STABILITY_SIZE,
+        &format!(
+            "Stability map of the step method: missed-collision fraction (m) and max overlap (ov); black line: m = {FAILURE_MISSED_FRACTION:e}"
+        ),
+        19,
+    )?;
     let (map_area, scale_area) = root.split_horizontally(STABILITY_SIZE.0 - 130);
     draw_colour_scale(&scale_area)?;
     let mut chart = ChartBuilder::on(&map_area)
@@ -357,14 +366,12 @@ pub fn draw_cooling(curves: &[CoolingCurve], dir: &Path) -> anyhow::Result<PathB
 }
 
 fn plot_cooling(curves: &[CoolingCurve], path: &Path) -> anyhow::Result<()> {
-    let root = BitMapBackend::new(path, COOLING_SIZE).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
-    let root = root
-        .titled(
-            "Cooling (e < 1): T/T₀ against t/t₀, Haff's law in black, broken-down runs dashed",
-            (FONT, 22),
-        )
-        .map_err(|e| anyhow!("{e}"))?;
+    let root = titled_canvas(
+        path,
+        COOLING_SIZE,
+        "Cooling (e < 1): T/T₀ against t/t₀, Haff's law in black, broken-down runs dashed",
+        22,
+    )?;
     // One panel per packing (curves arrive ordered by packing).
     let mut packings: Vec<f64> = curves.iter().map(|c| c.packing).collect();
     packings.dedup_by(|a, b| format!("{a:.4}") == format!("{b:.4}"));

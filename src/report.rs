@@ -246,6 +246,11 @@ fn choice_note(out: &mut String, records: &[Record]) {
     }
 }
 
+/// `text` in markdown bold when `bold`.
+fn bold_if(bold: bool, text: String) -> String {
+    if bold { format!("**{text}**") } else { text }
+}
+
 fn describe(setup: &Setup) -> String {
     let n = match setup.scaling {
         Scaling::Strong => format!("n = {}", setup.n),
@@ -486,11 +491,7 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
                 0.0 => "0".to_owned(),
                 m => cell(m, format!("{m:.2e}")),
             };
-            let missed = if p.failed() {
-                format!("**{missed}**")
-            } else {
-                missed
-            };
+            let missed = bold_if(p.failed(), missed);
             let _ = writeln!(
                 out,
                 "| {} | {} | {} | {:.4} | {:.1} | {:.3e} | {missed} | {:.3} | {:.4} | {} | {:.4} | {} |",
@@ -576,11 +577,7 @@ fn cooling_section(out: &mut String, curves: &[CoolingCurve]) {
         let [t_end, temperature_end] = curve.points[curve.points.len() - 1];
         let t_zero = curve.points[0][1];
         let deviation = format!("{:.2}%", 100.0 * curve.haff_deviation);
-        let deviation = if curve.broke_down() {
-            format!("**{deviation}**")
-        } else {
-            deviation
-        };
+        let deviation = bold_if(curve.broke_down(), deviation);
         let _ = writeln!(
             out,
             "| {:.2} | {} | {} | {:.3} | {:.3} | {:.4} | {:.4} | {deviation} | {} |",
