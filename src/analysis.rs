@@ -104,11 +104,7 @@ pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {
             Some(index) => index,
             None => {
                 let first = first_of_series(&series);
-                let scaling = if first.scaling == Scaling::Weak.name() {
-                    Scaling::Weak
-                } else {
-                    Scaling::Strong
-                };
+                let scaling = first.scaling();
                 series_order.push(series.clone());
                 setups.push(Setup {
                     scene: first.scene.clone(),

@@ -324,10 +324,19 @@ impl Record {
         self.key_with_n(&format!("n={}", self.n))
     }
 
+    /// How the study scaled; anything but `weak` (older files have `strong`) is strong.
+    pub fn scaling(&self) -> Scaling {
+        if self.scaling == Scaling::Weak.name() {
+            Scaling::Weak
+        } else {
+            Scaling::Strong
+        }
+    }
+
     /// The runs one scaling curve compares: the setup, except that in a weak-scaling
     /// study n grows with the workers, so the curve is keyed by n per worker.
     pub fn series_key(&self) -> String {
-        if self.scaling == Scaling::Weak.name() {
+        if self.scaling() == Scaling::Weak {
             self.key_with_n(&format!("weak n/worker={}", self.n / self.workers.max(1)))
         } else {
             self.setup_key()

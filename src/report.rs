@@ -123,11 +123,7 @@ fn environment(out: &mut String, first: &Record, records: &[Record]) {
     let _ = writeln!(out, "| MPI | {} |", first.mpi_library);
     let _ = writeln!(out, "| Started | {} |", first.study_started_utc);
     // The machine's other work distorts timings: say how busy it was.
-    let busiest = records
-        .iter()
-        .map(|r| r.load_average)
-        .filter(|l| l.is_finite())
-        .fold(f64::NAN, f64::max);
+    let busiest = peak_load_average(records);
     let _ = writeln!(
         out,
         "| Load | 1-minute load average {:.2} at the start, at most {:.2} after a run, {} at the end |",
@@ -183,15 +179,20 @@ fn warnings(out: &mut String, records: &[Record], setups: &[Setup]) {
     }
 }
 
+/// The highest 1-minute load average recorded after a run (NaN if none was).
+fn peak_load_average(records: &[Record]) -> f64 {
+    records
+        .iter()
+        .map(|r| r.load_average)
+        .filter(|l| l.is_finite())
+        .fold(f64::NAN, f64::max)
+}
+
 /// Calls out a study measured on a busy machine: a load average above the core count
 /// during the runs, or repetitions whose slowest took much longer than the fastest.
 fn noise_warning(out: &mut String, records: &[Record], setups: &[Setup]) {
     let cores = records[0].logical_cores as f64;
-    let busiest = records
-        .iter()
-        .map(|r| r.load_average)
-        .filter(|l| l.is_finite())
-        .fold(0.0, f64::max);
+    let busiest = peak_load_average(records);
     let mut spread: Vec<String> = setups
         .iter()
         .flat_map(|setup| {
