@@ -11,6 +11,8 @@ use serde::{Deserialize, Serialize};
 pub struct RunSummary {
     /// Number of disks.
     pub n: usize,
+    /// Steps (intervals of dt for the event method) done: as asked, or fewer when the
+    /// event method detected inelastic collapse.
     pub steps: u64,
     /// Time step (simulation time units).
     pub dt: f64,
@@ -110,8 +112,21 @@ pub struct RunSummary {
     /// Event method with e < 1: the TC model time used; else null.
     #[serde(default)]
     pub collapse_tc: Option<f64>,
+    /// Event method: the simulated time at which inelastic collapse was detected (the
+    /// run stopped there, after `steps` intervals; see `sim::collapse`); null when none
+    /// was, and for the step method.
+    #[serde(default)]
+    pub collapse_time: Option<f64>,
+    /// Simulated time the run reached: steps·dt, or `collapse_time` (null in summaries
+    /// written before it was recorded).
+    #[serde(default)]
+    pub time_reached: Option<f64>,
+    /// Event method: the TC model time used (0: guard off), whatever e; null for the
+    /// step method.
+    #[serde(default)]
+    pub tc: Option<f64>,
     /// Scenes with e < 1 (pairs or walls), serial backend: [t, T] at t = 0 and at up
-    /// to 40 evenly spaced steps; else null.
+    /// to 40 evenly spaced steps (ending at `collapse_time` if there was one); else null.
     #[serde(default)]
     pub temperature_curve: Option<Vec<[f64; 2]>>,
     /// v_rms·dt/r_min of the initial state: how far the rms disk moves per step, in
@@ -229,6 +244,13 @@ impl fmt::Display for RunSummary {
                 f,
                 "collapse   TC guard fired {guard} times (tc = {})",
                 show(self.collapse_tc)
+            )?;
+        }
+        if let Some(time) = self.collapse_time {
+            writeln!(
+                f,
+                "collapse   inelastic collapse detected at t = {time:.6e}: the event method stopped there, in step {}",
+                self.steps
             )?;
         }
         if let Some(choice) = &self.choice {

@@ -13,7 +13,7 @@
 //! in the serial order, which is why the bits agree.
 
 use std::collections::HashMap;
-use std::ops::Range;
+use std::ops::{ControlFlow, Range};
 use std::time::Instant;
 
 use crate::backend::comm::Communicator;
@@ -49,7 +49,8 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     let setup_s = setup_start.elapsed().as_secs_f64();
 
     let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, |_| {
-        rank.step(comm, prepared.params.dt)
+        rank.step(comm, prepared.params.dt);
+        ControlFlow::Continue(())
     });
 
     // Collective reductions: the whole state and the counters, on every rank.

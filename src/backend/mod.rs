@@ -13,6 +13,7 @@ pub mod serial;
 pub mod threads;
 
 use std::num::NonZeroUsize;
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 use crate::sim::observe::{Observables, observe, state_hash};
@@ -123,7 +124,8 @@ pub struct LoopSeconds {
 }
 
 /// The stepping loop every backend times: `step(1)` to `step(steps)`, each followed by
-/// the injected extra work (none in real runs).
+/// the injected extra work (none in real runs). A step returning `Break` ends the loop
+/// after it (the event method at a detected collapse).
 ///
 /// The extra work is integer arithmetic on the calling thread, counted on the clock that
 /// `collide check` compares: after each step it runs until the CPU seconds of `scope`
@@ -134,7 +136,7 @@ pub fn step_loop(
     steps: u64,
     slowdown: InjectedSlowdown,
     scope: CpuScope,
-    mut step: impl FnMut(u64),
+    mut step: impl FnMut(u64) -> ControlFlow<()>,
 ) -> LoopSeconds {
     let fraction = slowdown.fraction();
     let cpu_start = cpu_seconds(scope);
@@ -144,7 +146,7 @@ pub fn step_loop(
         let mut owed = 0.0;
         for number in 1..=steps {
             let before = clock();
-            step(number);
+            let flow = step(number);
             let mut now = clock();
             owed += fraction * (now - before);
             while owed > 0.0 {
@@ -153,10 +155,15 @@ pub fn step_loop(
                 owed -= later - now;
                 now = later;
             }
+            if flow.is_break() {
+                break;
+            }
         }
     } else {
         for number in 1..=steps {
-            step(number);
+            if step(number).is_break() {
+                break;
+            }
         }
     }
     let wall = loop_start.elapsed().as_secs_f64();
@@ -227,8 +234,19 @@ pub struct Accuracy {
     pub missed_collisions: Option<u64>,
     /// Event method: collisions the TC model made elastic, and its time.
     pub collapse_guard: Option<(u64, f64)>,
+    /// Event method: the inelastic collapse that ended the run early.
+    pub collapse: Option<Collapse>,
     /// [t, kinetic energy per disk] at t = 0 and at up to [`CURVE_SAMPLES`] steps.
     pub temperature_curve: Option<Vec<[f64; 2]>>,
+}
+
+/// Where a run of the event method stopped at a detected inelastic collapse.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Collapse {
+    /// The simulated time of the collapse (where the state was left).
+    pub time: f64,
+    /// Intervals of dt stepped, the last one the interval the collapse fell in.
+    pub steps: u64,
 }
 
 /// Samples of the temperature curve after t = 0.
@@ -251,15 +269,18 @@ pub fn summarize(
     last: &Particles,
 ) -> RunSummary {
     let n = last.len();
-    let steps = prepared.steps;
+    let accuracy = &measured.accuracy;
+    // A collapse ends the run early: the steps done, and the time the state reached.
+    let (steps, duration) = match accuracy.collapse {
+        Some(collapse) => (collapse.steps, collapse.time),
+        None => (prepared.steps, prepared.steps as f64 * prepared.params.dt),
+    };
     let wall_s = measured.wall_s;
     let final_observables = observe(last);
     let cores = machine_cores();
     let counters = &measured.counters;
-    let accuracy = &measured.accuracy;
     let scene = &prepared.scene;
     let physics = &scene.physics;
-    let duration = steps as f64 * prepared.params.dt;
     let n_f = n.max(1) as f64;
     // T̄: the time average of the sampled curve (trapezoids), else the mean of the ends.
     let temperature = match &accuracy.temperature_curve {
@@ -338,6 +359,9 @@ pub fn summarize(
             .collapse_guard
             .filter(|_| physics.restitution < 1.0)
             .map(|(_, tc)| tc),
+        collapse_time: accuracy.collapse.map(|collapse| collapse.time),
+        time_reached: Some(duration),
+        tc: is_event.then_some(prepared.event.tc),
         temperature_curve: accuracy.temperature_curve.clone().filter(|_| !elastic),
         rms_step_over_radius: {
             let step = scene.particles.rms_speed() * prepared.params.dt;

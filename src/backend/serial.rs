@@ -1,10 +1,11 @@
 //! The serial backend: the reference implementation every parallel backend must match,
 //! and the only one that runs the event-driven method and the accuracy observers.
 
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 use crate::backend::{
-    Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, is_curve_sample,
+    Accuracy, BackendError, Collapse, CpuScope, Measured, RunOutcome, StageSeconds, Workers, is_curve_sample,
     step_loop, summarize, timed,
 };
 use crate::sim::Particles;
@@ -53,6 +54,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
                     }
                 }
                 curve.sample(&prepared, step, &particles);
+                ControlFlow::Continue(())
             });
             let accuracy = Accuracy {
                 missed_collisions: missed.map(|m| m.missed),
@@ -64,15 +66,28 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
             let scene = &prepared.scene;
             let mut sim = EventSim::new(scene.domain, scene.physics, prepared.event, &particles);
             let setup_s = setup_start.elapsed().as_secs_f64();
+            let mut collapse = None;
             let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, |step| {
                 // The time of interval k is k·dt, not a running sum.
                 timed(&mut stages.collisions, || {
                     sim.advance_to(&mut particles, step as f64 * prepared.params.dt)
                 });
-                curve.sample(&prepared, step, &particles);
+                match sim.collapse_time() {
+                    // The run ends where the method broke down; so does its curve.
+                    Some(time) => {
+                        curve.push(time, &particles);
+                        collapse = Some(Collapse { time, steps: step });
+                        ControlFlow::Break(())
+                    }
+                    None => {
+                        curve.sample(&prepared, step, &particles);
+                        ControlFlow::Continue(())
+                    }
+                }
             });
             let accuracy = Accuracy {
                 collapse_guard: Some((sim.collapse_guard_fired(), prepared.event.tc)),
+                collapse,
                 ..Accuracy::default()
             };
             (setup_s, seconds, sim.counters(), accuracy)
@@ -120,11 +135,16 @@ impl Curve {
     /// Records a point after `step` if it is one of the sampled steps.
     fn sample(&mut self, prepared: &PreparedRun, step: u64, particles: &Particles) {
         if is_curve_sample(step, prepared.steps) {
-            let points = &mut self.points;
-            timed(&mut self.seconds, || {
-                points.push([step as f64 * prepared.params.dt, temperature(particles)]);
-            });
+            self.push(step as f64 * prepared.params.dt, particles);
         }
+    }
+
+    /// Records the point [time, T].
+    fn push(&mut self, time: f64, particles: &Particles) {
+        let points = &mut self.points;
+        timed(&mut self.seconds, || {
+            points.push([time, temperature(particles)]);
+        });
     }
 }
 

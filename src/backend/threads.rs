@@ -10,7 +10,7 @@
 //! therefore sees its contacts in the serial order, which is why the bits agree.
 
 use std::num::NonZeroUsize;
-use std::ops::Range;
+use std::ops::{ControlFlow, Range};
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -61,7 +61,8 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
 
     let seconds = pool.install(|| {
         step_loop(prepared.steps, spec.slowdown, CpuScope::Process, |_| {
-            stepper.step(&mut particles)
+            stepper.step(&mut particles);
+            ControlFlow::Continue(())
         })
     });
 

@@ -23,12 +23,15 @@
 //!   ([`exchange_along`]) along the line of centres at contact.
 //! - **Inelastic collapse** (e < 1): the TC model of Luding and McNamara — a collision is
 //!   elastic when either disk collided less than `tc` ago; [`EventSim::collapse_guard_fired`]
-//!   counts how often.
+//!   counts how often. Without the guard a collapse is detected
+//!   ([`super::collapse::CollapseDetector`], judged once per window of collisions): the
+//!   simulation then stops at [`EventSim::collapse_time`] and processes no more events.
 //!
 //! Gravity (parabolic flights) is not modelled: input validation refuses it with this
 //! method. Disks must start without overlaps (scene construction guarantees it).
 
 use super::cells::{CellList, NONE, Neighbour};
+use super::collapse::CollapseDetector;
 use super::collision::{PairSide, exchange_along};
 use super::particles::Particles;
 use super::scene::{Boundary, Domain, Physics};
@@ -182,6 +185,7 @@ pub struct EventSim {
     counters: StepCounters,
     cell_crossings: u64,
     collapse_guard_fired: u64,
+    collapse: CollapseDetector,
 }
 
 impl EventSim {
@@ -239,6 +243,7 @@ impl EventSim {
             counters: StepCounters::default(),
             cell_crossings: 0,
             collapse_guard_fired: 0,
+            collapse: CollapseDetector::new(n),
         };
         sim.reorder();
         for disk in 0..n as u32 {
@@ -312,12 +317,20 @@ impl EventSim {
         self.collapse_guard_fired
     }
 
+    /// The time at which inelastic collapse was detected; no event is processed after it.
+    pub fn collapse_time(&self) -> Option<f64> {
+        self.collapse.collapse_time()
+    }
+
     /// Processes every event up to time `t_end` (not before the current time), brings all
-    /// disks to `t_end` and writes their positions and velocities to `particles` (the set
-    /// this simulation started from, in the same storage order).
+    /// disks to `t_end` (to the collapse time if collapse was detected) and writes their
+    /// positions and velocities to `particles` (the set this simulation started from, in
+    /// the same storage order).
     pub fn advance_to(&mut self, particles: &mut Particles, t_end: f64) {
         self.run(t_end, u64::MAX);
-        self.time = self.time.max(t_end);
+        if self.collapse_time().is_none() {
+            self.time = self.time.max(t_end);
+        }
         self.write_state(particles);
     }
 
@@ -329,14 +342,24 @@ impl EventSim {
     }
 
     fn run(&mut self, t_end: f64, max_collisions: u64) {
-        let start = self.counters.pair_collisions + self.counters.wall_collisions;
+        if self.collapse_time().is_some() {
+            return;
+        }
+        let stop = (self.counters.pair_collisions + self.counters.wall_collisions)
+            .saturating_add(max_collisions);
+        // One comparison per event serves both limits: the caller's and the collapse
+        // detector's window.
+        let mut limit = stop.min(self.collapse.window_end());
         loop {
             let (time, disk) = self.tree.earliest();
-            if time > t_end
-                || disk == NONE
-                || self.counters.pair_collisions + self.counters.wall_collisions - start
-                    >= max_collisions
-            {
+            let collisions = self.counters.pair_collisions + self.counters.wall_collisions;
+            if collisions >= limit {
+                if collisions >= stop || self.collapse.judge(collisions, self.time) {
+                    return;
+                }
+                limit = stop.min(self.collapse.window_end());
+            }
+            if time > t_end || disk == NONE {
                 return;
             }
             self.time = time;

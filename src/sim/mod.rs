@@ -3,6 +3,7 @@
 //! No I/O, no printing, no threads: backends wrap it, and a step cannot fail.
 
 pub mod cells;
+pub mod collapse;
 pub mod collision;
 pub mod engine;
 pub mod event;
