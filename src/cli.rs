@@ -193,6 +193,10 @@ pub struct OverrideArgs {
     /// method's exact missed-collision count, outside `wall_s`; serial backend only).
     #[arg(long, value_parser = parse_observe)]
     pub observe: Option<Observe>,
+    /// TC model time of the event method's inelastic-collapse guard (0 turns it off;
+    /// default 1e-4 · r_min / v_rms).
+    #[arg(long, allow_hyphen_values = true)]
+    pub tc: Option<f64>,
 }
 
 impl OverrideArgs {
@@ -206,6 +210,7 @@ impl OverrideArgs {
             broadphase: self.broadphase,
             method: self.method,
             observe: self.observe,
+            tc: self.tc,
         }
     }
 }

@@ -82,7 +82,7 @@ impl Configuration {
             None => "-".to_owned(),
         };
         let show = |value: Option<String>| value.unwrap_or_else(|| "-".to_owned());
-        // Method and observe join the key only when swept, so the keys of manifests
+        // Method, observe and tc join the key only when swept, so the keys of manifests
         // written before they could be swept (and their `--resume`) stay as they were.
         let mut swept = String::new();
         if let Some(method) = o.method {
@@ -90,6 +90,9 @@ impl Configuration {
         }
         if let Some(observe) = o.observe {
             swept.push_str(&format!(";observe={}", observe.name()));
+        }
+        if let Some(tc) = o.tc {
+            swept.push_str(&format!(";tc={tc}"));
         }
         format!(
             "scene={};n={};packing={};dt={dt};steps={};seed={};broadphase={};backend={};workers={}{swept}",
@@ -136,6 +139,7 @@ impl Configuration {
         push("--broadphase", o.broadphase.map(|b| b.name().to_owned()));
         push("--method", o.method.map(|m| m.name().to_owned()));
         push("--observe", o.observe.map(|m| m.name().to_owned()));
+        push("--tc", o.tc.map(|tc| tc.to_string()));
         push("--backend", Some(self.backend_name().to_owned()));
         match self.backend {
             BackendName::Serial => {}
@@ -188,6 +192,7 @@ struct RawSweep {
     broadphase: Option<Spanned<Vec<Broadphase>>>,
     method: Option<Spanned<Vec<MethodChoice>>>,
     observe: Option<Spanned<Vec<Observe>>>,
+    tc: Option<Spanned<Vec<f64>>>,
     /// Keys whose lists pair up element by element instead of multiplying.
     zip: Option<Spanned<Vec<String>>>,
 }
@@ -406,6 +411,7 @@ fn sweep_points(sweep: &RawSweep) -> Result<Vec<Overrides>, (usize, String)> {
     list!("broadphase", broadphase, |v: Broadphase| v);
     list!("method", method, |v: MethodChoice| v);
     list!("observe", observe, |v: Observe| v);
+    list!("tc", tc, |v: f64| v);
     for (key, offset, len, _) in &lists {
         if *len == 0 {
             return Err((
@@ -543,6 +549,9 @@ fn describe(o: &Overrides) -> String {
     }
     if let Some(o) = o.observe {
         parts.push(format!("observe = {}", o.name()));
+    }
+    if let Some(tc) = o.tc {
+        parts.push(format!("tc = {tc}"));
     }
     if parts.is_empty() {
         "its own settings".into()

@@ -14,7 +14,7 @@ use crate::manifest::Scaling;
 use crate::output::write_atomically;
 use crate::summary::RunSummary;
 
-pub const SCHEMA_VERSION: u32 = 4;
+pub const SCHEMA_VERSION: u32 = 5;
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
 const OLDEST_READABLE_VERSION: u32 = 1;
 
@@ -53,6 +53,10 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     // Version 3 had no `method = "auto"` / tolerance-chosen dt.
     (4, "choice", Fill::Str("")),
     (4, "temperature_curve", Fill::Str("")),
+    // Version 4 had no collapse detector (a collapsing run stalled until its timeout, so
+    // no successful row had a collapse) and did not record the event method's TC time.
+    (5, "collapse_time", Fill::F64(f64::NAN)),
+    (5, "tc", Fill::F64(f64::NAN)),
 ];
 
 /// What became of one run.
@@ -123,6 +127,11 @@ pub struct Record {
     pub mean_overlap: f64,
     pub energy_relative_error: f64,
     pub collapse_guard_fired: Option<u64>,
+    /// Event method: simulated time of the detected inelastic collapse (the run stopped
+    /// there, `steps` counting the interval it fell in); NaN when none, and for step.
+    pub collapse_time: f64,
+    /// Event method: the TC model time used (0: guard off); NaN for the step method.
+    pub tc: f64,
     /// v_rms·dt/r_min at the start (see the JSON summary); NaN where not known.
     pub rms_step_over_radius: f64,
     /// What `method = "auto"` / `dt = "auto"` chose and why (the JSON summary's
@@ -215,6 +224,8 @@ impl Record {
         record.mean_overlap = nan(summary.mean_overlap);
         record.energy_relative_error = nan(summary.energy_relative_error);
         record.collapse_guard_fired = summary.collapse_guard_fired;
+        record.collapse_time = nan(summary.collapse_time);
+        record.tc = nan(summary.tc);
         record.rms_step_over_radius = nan(summary.rms_step_over_radius);
         record.choice = summary.choice.clone().unwrap_or_default();
         record.temperature_curve = summary
@@ -291,6 +302,8 @@ impl Record {
             mean_overlap: f64::NAN,
             energy_relative_error: f64::NAN,
             collapse_guard_fired: None,
+            collapse_time: f64::NAN,
+            tc: f64::NAN,
             rms_step_over_radius: f64::NAN,
             choice: String::new(),
             temperature_curve: String::new(),
@@ -407,7 +420,7 @@ macro_rules! for_each_column {
                  momentum_final_x, momentum_final_y, max_overlap, load_average_start,
                  load_average, load_average_end, events_per_s, collision_rate, temperature,
                  pressure, compressibility_z, missed_collision_fraction, mean_overlap,
-                 energy_relative_error, rms_step_over_radius;
+                 energy_relative_error, rms_step_over_radius, collapse_time, tc;
             bool: oversubscribed, git_dirty;
             opt_u64: seed, missed_collisions, collapse_guard_fired
         )

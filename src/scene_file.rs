@@ -31,6 +31,8 @@ pub struct Overrides {
     pub broadphase: Option<Broadphase>,
     pub method: Option<MethodChoice>,
     pub observe: Option<Observe>,
+    /// TC model time of the event method (0: guard off).
+    pub tc: Option<f64>,
 }
 
 /// A time step as written: a number or the word "auto".
@@ -313,7 +315,7 @@ impl Validator<'_> {
         let observe = self
             .pick("--observe", overrides.observe, &raw.observe, |o| *o)
             .map_or(Observe::Timing, |sourced| sourced.value);
-        let tc = match self.in_file(&raw.tc) {
+        let tc = match self.pick("--tc", overrides.tc, &raw.tc, |t| *t) {
             Some(Sourced { value, origin }) if !(value >= 0.0 && value.is_finite()) => {
                 return Err(self.invalid(
                     origin,

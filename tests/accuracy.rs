@@ -12,7 +12,7 @@ use collide::backend::serial;
 use collide::scene_file::{self, Overrides};
 use collide::sim::event::{EventParams, EventSim};
 use collide::sim::scene::{GasSpec, Placement};
-use collide::sim::{Boundary, Particles, Physics, Scene};
+use collide::sim::{Boundary, Disk, Domain, Particles, Physics, Scene};
 use collide::spec::{Method, MethodChoice, Observe};
 
 use crate::cli::{collide as run_collide, json_summary, scene_file as write_scene};
@@ -154,6 +154,7 @@ fn elastic_gas_relaxes_to_the_2d_maxwell_boltzmann_speed_distribution() {
     let (mut sim, mut particles) = event_sim(&scene);
     sim.advance_to(&mut particles, 20.0 / enskog_rate(0.2, t));
     let d_end = ks_distance_from_maxwell(&particles, t);
+    assert_eq!(sim.collapse_time(), None);
     assert!(
         d_end < critical,
         "after relaxation D = {d_end:.4}, critical {critical:.4} (start {d_start:.3})"
@@ -186,6 +187,78 @@ fn inelastic_gas_cools_by_haffs_law_early_on() {
     assert!(temperature(&particles) < 0.3 * t0_temperature);
     // The TC guard exists for collapse; in this dilute early stage it must be rare.
     assert!(sim.collapse_guard_fired() * 1000 < sim.counters().pair_collisions);
+    assert_eq!(sim.collapse_time(), None);
+}
+
+/// Three unit disks on one line in a walled box, the outer two closing in on the middle
+/// one (off centre, so no two collisions coincide), at restitution `e` and TC time `tc`.
+fn three_in_a_row(e: f64, tc: f64) -> (EventSim, Particles) {
+    let disk = |x, vx| Disk {
+        x,
+        y: 50.0,
+        vx,
+        vy: 0.0,
+        radius: 1.0,
+        mass: 1.0,
+    };
+    let particles = Particles::from_disks(&[disk(40.0, 1.0), disk(49.0, 0.0), disk(60.0, -1.0)]);
+    let domain = Domain {
+        width: 100.0,
+        height: 100.0,
+        boundary: Boundary::Walls,
+    };
+    let sim = EventSim::new(
+        domain,
+        Physics::with_restitution(e),
+        EventParams { tc },
+        &particles,
+    );
+    (sim, particles)
+}
+
+#[test]
+fn three_disks_in_a_row_collapse_without_the_guard_and_not_with_it() {
+    // In 1D three equal disks collapse (infinitely many collisions in finite time, all
+    // gaps closing) for e < 7 − 4√3 ≈ 0.072 (McNamara and Young 1992). At e = 0.05 the
+    // middle disk rattles between the outer two at geometrically shorter intervals.
+    let (mut sim, mut particles) = three_in_a_row(0.05, 0.0);
+    sim.advance_to(&mut particles, 100.0);
+    let collapse = sim.collapse_time().expect("e = 0.05 without the guard collapses");
+    // The first collision is at t = 7 (gap 7 closed at speed 1); the rattling then
+    // converges within a few time units. The state is left at the collapse.
+    assert!(collapse > 7.0 && collapse < 20.0, "collapse at t = {collapse}");
+    assert_eq!(sim.time(), collapse);
+    // At a collapse every gap has closed (to rounding) and, the total momentum being 0,
+    // the three have all but stopped: their speeds fell from 1 by about the factor the
+    // detector's criterion (1e-6) demands of the collision intervals.
+    let gaps = [
+        particles.x[1] - particles.x[0] - 2.0,
+        particles.x[2] - particles.x[1] - 2.0,
+    ];
+    assert!(gaps.iter().all(|g| g.abs() < 1e-6), "gaps {gaps:?}");
+    assert!(
+        particles.vx.iter().all(|v| v.abs() < 1e-4),
+        "{:?}",
+        particles.vx
+    );
+    // Nothing more is processed after it.
+    let collisions = sim.counters().pair_collisions;
+    sim.advance_to(&mut particles, 200.0);
+    assert_eq!(sim.counters().pair_collisions, collisions);
+    assert_eq!(sim.time(), collapse);
+
+    // With the TC guard a re-collision within tc is elastic: the cluster bounces apart
+    // and the run reaches its end.
+    let (mut sim, mut particles) = three_in_a_row(0.05, 1e-3);
+    sim.advance_to(&mut particles, 100.0);
+    assert_eq!(sim.collapse_time(), None);
+    assert!(sim.collapse_guard_fired() > 0);
+    assert_eq!(sim.time(), 100.0);
+
+    // Above the threshold there is no collapse even without the guard.
+    let (mut sim, mut particles) = three_in_a_row(0.2, 0.0);
+    sim.advance_to(&mut particles, 100.0);
+    assert_eq!(sim.collapse_time(), None);
 }
 
 #[test]
@@ -198,6 +271,7 @@ fn a_perfectly_inelastic_dense_gas_runs_to_the_end() {
     let t0 = temperature(&particles);
     sim.advance_to(&mut particles, 50.0);
     assert!(sim.collapse_guard_fired() > 0);
+    assert_eq!(sim.collapse_time(), None);
     assert!(temperature(&particles) < 0.1 * t0);
     // Overlaps stay at rounding level.
     assert!(
@@ -371,9 +445,12 @@ fn the_json_summary_carries_the_accuracy_fields_of_both_methods() {
         }
         assert_eq!(json["events_per_s"].is_f64(), method == "event");
         assert_eq!(json["missed_collisions"].is_u64(), method == "event");
-        // Elastic scene: no cooling curve, no collapse guard.
+        // Elastic scene: no cooling curve, no collapse guard, no collapse.
         assert!(json["temperature_curve"].is_null());
         assert!(json["collapse_guard_fired"].is_null());
+        assert!(json["collapse_time"].is_null());
+        assert_eq!(json["tc"].is_f64(), method == "event");
+        assert!(json["time_reached"].is_f64());
     }
     let json = seed_scene_summary(&[
         "--method",
@@ -399,4 +476,8 @@ fn the_json_summary_carries_the_accuracy_fields_of_both_methods() {
     assert!(last < 0.5 * first, "{first} → {last}");
     assert!(json["collapse_guard_fired"].is_u64());
     assert!(json["energy_relative_error"].is_null());
+    // Guarded (default tc): no collapse, the run reaches its end.
+    assert!(json["collapse_time"].is_null());
+    assert_eq!(json["time_reached"].as_f64(), Some(50.0));
+    assert_eq!(json["steps"].as_u64(), Some(100));
 }

@@ -243,7 +243,10 @@ impl EventSim {
             counters: StepCounters::default(),
             cell_crossings: 0,
             collapse_guard_fired: 0,
-            collapse: CollapseDetector::new(n),
+            collapse: CollapseDetector::new(
+                n,
+                physics.restitution < 1.0 || physics.wall_restitution < 1.0,
+            ),
         };
         sim.reorder();
         for disk in 0..n as u32 {
