@@ -1,7 +1,8 @@
-//! The accuracy study's analysis: the successful runs grouped by packing, method and dt,
-//! each step-method point's errors against the event-driven reference at the same
-//! packing, and the Pareto front of speed against error. Pure: records in, numbers out;
-//! the report and `accuracy_figures` present them.
+//! The accuracy study's analysis: the successful runs grouped by packing, method, dt and
+//! TC time, each point's errors against the event-driven reference at the same packing,
+//! the Pareto front of speed against error, and for e < 1 the cooling curves against
+//! Haff's law with where each run broke down. Pure: records in, numbers out; the report
+//! and `accuracy_figures` present them.
 
 use std::collections::BTreeMap;
 
@@ -12,12 +13,18 @@ use crate::results::median;
 /// issue 6's default tolerance for `dt = "auto"`).
 pub const FAILURE_MISSED_FRACTION: f64 = 1e-3;
 
-/// One method at one packing and dt: medians over its repetitions.
+/// One method at one packing, dt and TC time: medians over its repetitions.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AccuracyPoint {
     pub method: String,
     pub packing: f64,
     pub dt: f64,
+    /// The event method's TC time (0: guard off); NaN for the step method and in records
+    /// older than schema version 5.
+    pub tc: f64,
+    /// The event method's detected collapse time (the first repetition's: runs are
+    /// seeded); NaN when none.
+    pub collapse_time: f64,
     /// v_rms·dt/r_min (NaN in records older than schema version 3).
     pub step_over_radius: f64,
     /// Simulated time steps·dt.
@@ -45,12 +52,14 @@ impl AccuracyPoint {
     }
 }
 
-/// Every point at one packing: the event reference (if run) and the step method by
-/// decreasing dt.
+/// Every point at one packing: the event reference (if run), the other event runs
+/// (other TC times or dt) and the step method by decreasing dt.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PackingGroup {
     pub packing: f64,
     pub reference: Option<AccuracyPoint>,
+    /// Event runs besides the reference (e.g. with the TC guard off), by decreasing tc.
+    pub events: Vec<AccuracyPoint>,
     pub steps: Vec<AccuracyPoint>,
 }
 
@@ -62,31 +71,35 @@ pub fn is_accuracy_study(records: &[Record]) -> bool {
 }
 
 /// The successful serial runs grouped by packing (ascending), each step point compared
-/// with the event run of the same packing (the first, if several dt were run).
+/// with the event reference of the same packing: the guarded event run (the first, if
+/// several dt or TC times were run); the other event runs are listed apart.
 pub fn analyse(records: &[Record]) -> Vec<PackingGroup> {
     // Packing is a float computed from the box: group on its 4-decimal text, the
-    // precision the report prints, so equal manifest packings land together.
-    let mut runs: BTreeMap<(String, String, String), Vec<&Record>> = BTreeMap::new();
+    // precision the report prints, so equal manifest packings land together. Runs that
+    // differ in tc are never merged.
+    let mut runs: BTreeMap<(String, String, String, String), Vec<&Record>> = BTreeMap::new();
     for record in records.iter().filter(|r| r.status == STATUS_OK) {
         let key = (
             format!("{:.4}", record.packing),
             record.method.clone(),
+            format!("{:e}", record.tc),
             format!("{:e}", record.dt),
         );
         runs.entry(key).or_default().push(record);
     }
     let mut groups: BTreeMap<String, PackingGroup> = BTreeMap::new();
-    for ((packing_key, method, _), group) in &runs {
+    for ((packing_key, method, ..), group) in &runs {
         let point = summarise(method, group);
         let entry = groups
             .entry(packing_key.clone())
             .or_insert_with(|| PackingGroup {
                 packing: point.packing,
                 reference: None,
+                events: Vec::new(),
                 steps: Vec::new(),
             });
         if method == "event" {
-            entry.reference.get_or_insert(point);
+            entry.events.push(point);
         } else {
             entry.steps.push(point);
         }
@@ -95,9 +108,16 @@ pub fn analyse(records: &[Record]) -> Vec<PackingGroup> {
     groups.sort_by(|a, b| a.packing.total_cmp(&b.packing));
     for group in &mut groups {
         group.steps.sort_by(|a, b| b.dt.total_cmp(&a.dt));
+        // Guarded first (tc not recorded counts as guarded: NaN sorts above every tc),
+        // by decreasing tc; the reference is the first guarded run.
+        group.events.sort_by(|a, b| b.tc.total_cmp(&a.tc));
+        if !group.events.is_empty() {
+            let chosen = group.events.iter().position(|p| p.tc != 0.0).unwrap_or(0);
+            group.reference = Some(group.events.remove(chosen));
+        }
         if let Some(reference) = &group.reference {
             let (z_ref, rate_ref) = (reference.compressibility_z, reference.collision_rate);
-            for point in &mut group.steps {
+            for point in group.steps.iter_mut().chain(&mut group.events) {
                 point.z_error = relative_error(point.compressibility_z, z_ref);
                 point.rate_error = relative_error(point.collision_rate, rate_ref);
             }
@@ -131,6 +151,8 @@ fn summarise(method: &str, runs: &[&Record]) -> AccuracyPoint {
         method: method.to_owned(),
         packing: first.packing,
         dt: first.dt,
+        tc: first.tc,
+        collapse_time: first.collapse_time,
         step_over_radius: med(|r| r.rms_step_over_radius),
         sim_time,
         runs: runs.len(),
@@ -264,17 +286,41 @@ pub struct CoolingCurve {
     pub method: String,
     pub packing: f64,
     pub dt: f64,
+    /// The event method's TC time (0: guard off); NaN for the step method.
+    pub tc: f64,
     /// v_rms·dt/r_min at the start (NaN where not recorded).
     pub step_over_radius: f64,
     /// [t, T] from the record's `temperature_curve` (the first repetition: the runs are
-    /// seeded, so the repetitions' curves are the same).
+    /// seeded, so the repetitions' curves are the same); it ends at a collapse.
     pub points: Vec<[f64; 2]>,
-    /// Haff's t₀ at this packing, fitted to the event run's curve (see [`cooling`]).
+    /// Haff's t₀ at this packing, fitted to the event reference's curve (see [`cooling`]).
     pub haff_t0: f64,
     /// Largest |T/T_Haff − 1| over the curve.
     pub haff_deviation: f64,
     /// The event method's TC guard count; `None` for the step method.
     pub collapse_guard_fired: Option<u64>,
+    /// The event method's detected inelastic collapse time; NaN when none.
+    pub collapse_time: f64,
+}
+
+/// A run's method as the report and figures label it: the event method with its TC
+/// time where recorded ("event, tc = 0"), the step method by name.
+pub fn method_label(method: &str, tc: f64) -> String {
+    if method == "event" && tc.is_finite() {
+        format!("event, tc = {tc}")
+    } else {
+        method.to_owned()
+    }
+}
+
+/// How and when a run broke down.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Breakdown {
+    /// The event method detected inelastic collapse at this time (and stopped there).
+    Collapse { time: f64 },
+    /// T first departed from Haff's law by more than [`HAFF_BREAKDOWN`] at this sampled
+    /// time.
+    OffHaff { time: f64 },
 }
 
 impl CoolingCurve {
@@ -283,34 +329,66 @@ impl CoolingCurve {
         self.points[0][1] / (1.0 + t / self.haff_t0).powi(2)
     }
 
-    /// The curve deviates from Haff's law by more than [`HAFF_BREAKDOWN`].
+    /// |T/T_Haff − 1| at a point of the curve.
+    fn deviation(&self, [t, temperature]: [f64; 2]) -> f64 {
+        (temperature / self.haff(t) - 1.0).abs()
+    }
+
+    /// Whether and when the run broke down: a collapse, else the first sampled point
+    /// off Haff's law by more than [`HAFF_BREAKDOWN`].
+    pub fn breakdown(&self) -> Option<Breakdown> {
+        if self.collapse_time.is_finite() {
+            return Some(Breakdown::Collapse {
+                time: self.collapse_time,
+            });
+        }
+        self.points
+            .iter()
+            .find(|&&point| {
+                let deviation = self.deviation(point);
+                deviation.is_nan() || deviation > HAFF_BREAKDOWN
+            })
+            .map(|point| Breakdown::OffHaff { time: point[0] })
+    }
+
+    /// The curve collapsed or deviates from Haff's law by more than [`HAFF_BREAKDOWN`].
     pub fn broke_down(&self) -> bool {
-        self.haff_deviation.is_nan() || self.haff_deviation > HAFF_BREAKDOWN
+        self.breakdown().is_some()
     }
 }
 
 /// The cooling curves of a study's successful e < 1 runs (records with a
-/// `temperature_curve`), one per packing, method and dt, ordered by packing, event first,
-/// then by decreasing dt. Haff's t₀ is fitted, per packing, to the event run's curve by
-/// least squares on √(T₀/T) − 1 = t/t₀ (the law's linear form); the restitution is not
-/// in the records, so the law is the event method's, and the curves of the step method
-/// are judged against it. Empty without curves, or at a packing without an event run.
+/// `temperature_curve`), one per packing, method, TC time and dt, ordered by packing,
+/// event first (guarded by decreasing tc, then unguarded), then by decreasing dt.
+/// Haff's t₀ is fitted, per packing, to the first event run's curve (the guarded
+/// reference, which cannot collapse) by least squares on √(T₀/T) − 1 = t/t₀ (the law's
+/// linear form); the restitution is not in the records, so the law is the event
+/// method's, and the other curves are judged against it. Empty without curves, or at a
+/// packing without an event run.
 pub fn cooling(records: &[Record]) -> Vec<CoolingCurve> {
-    let mut runs: BTreeMap<(String, bool, String), &Record> = BTreeMap::new();
+    let mut runs: BTreeMap<(String, bool, String, String), &Record> = BTreeMap::new();
     for record in records
         .iter()
         .filter(|r| r.status == STATUS_OK && !r.temperature_curve.is_empty())
     {
+        // Decreasing tc as increasing text: 1/(1 + tc) in fixed width; a tc not
+        // recorded (NaN: older records, or the step method) as the empty text, first.
+        let tc_order = if record.tc.is_nan() {
+            String::new()
+        } else {
+            format!("{:.15}", 1.0 / (1.0 + record.tc))
+        };
         let key = (
             format!("{:.4}", record.packing),
             record.method != "event",
+            tc_order,
             format!("{:024.12}", 1.0 / record.dt),
         );
         runs.entry(key).or_insert(record);
     }
     let mut curves = Vec::new();
     let (mut t0, mut packing) = (f64::NAN, String::new());
-    for ((packing_key, is_step, _), record) in runs {
+    for ((packing_key, is_step, ..), record) in runs {
         if packing_key != packing {
             (t0, packing) = (f64::NAN, packing_key);
         }
@@ -320,7 +398,7 @@ pub fn cooling(records: &[Record]) -> Vec<CoolingCurve> {
         if points.len() < 2 || points[0][1] <= 0.0 {
             continue;
         }
-        if !is_step {
+        if !is_step && t0.is_nan() {
             t0 = haff_t0(&points);
         }
         if t0.is_nan() {
@@ -330,16 +408,18 @@ pub fn cooling(records: &[Record]) -> Vec<CoolingCurve> {
             method: record.method.clone(),
             packing: record.packing,
             dt: record.dt,
+            tc: record.tc,
             step_over_radius: record.rms_step_over_radius,
             points,
             haff_t0: t0,
             haff_deviation: 0.0,
             collapse_guard_fired: record.collapse_guard_fired,
+            collapse_time: record.collapse_time,
         };
         curve.haff_deviation = curve
             .points
             .iter()
-            .map(|&[t, temperature]| (temperature / curve.haff(t) - 1.0).abs())
+            .map(|&point| curve.deviation(point))
             .fold(0.0, f64::max);
         curves.push(curve);
     }

@@ -10,7 +10,8 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::accuracy::{
-    AccuracyPoint, CoolingCurve, FAILURE_MISSED_FRACTION, PackingGroup, pareto_front,
+    AccuracyPoint, Breakdown, CoolingCurve, FAILURE_MISSED_FRACTION, PackingGroup,
+    method_label, pareto_front,
 };
 use crate::figures::{FONT, PALETTE, draw_legend, register_font};
 
@@ -356,8 +357,8 @@ pub const COOLING_FILE: &str = "accuracy-cooling.png";
 const COOLING_SIZE: (u32, u32) = (1400, 620);
 
 /// Draws T/T₀ against t/t₀ of every cooling curve (one panel per packing, one line per
-/// method and dt, dashed where it broke down) with Haff's law 1/(1 + t/t₀)² in black;
-/// returns its path.
+/// method, TC time and dt, dashed where it broke down, a cross where the event method
+/// collapsed) with Haff's law 1/(1 + t/t₀)² in black; returns its path.
 pub fn draw_cooling(curves: &[CoolingCurve], dir: &Path) -> anyhow::Result<PathBuf> {
     register_font();
     let path = dir.join(COOLING_FILE);
@@ -369,7 +370,7 @@ fn plot_cooling(curves: &[CoolingCurve], path: &Path) -> anyhow::Result<()> {
     let root = titled_canvas(
         path,
         COOLING_SIZE,
-        "Cooling (e < 1): T/T₀ against t/t₀, Haff's law in black, broken-down runs dashed",
+        "Cooling (e < 1): T/T₀ against t/t₀, Haff's law in black, broken-down runs dashed, collapse ×",
         22,
     )?;
     // One panel per packing (curves arrive ordered by packing).
@@ -445,6 +446,7 @@ fn plot_cooling_panel(
         .map_err(|e| anyhow!("{e}"))?
         .label("Haff's law 1/(1 + t/t₀)²")
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.stroke_width(3)));
+    let mut collapse_legend = false;
     for (index, curve) in curves.iter().enumerate() {
         let colour = COOLING_COLOURS[index % COOLING_COLOURS.len()];
         let points = scaled(curve);
@@ -453,9 +455,18 @@ fn plot_cooling_panel(
         } else {
             format!("v_rms·dt/r = {:.3}", curve.step_over_radius)
         };
+        let t_end = points.last().map_or(0.0, |p| p.0);
+        // The unguarded event run says whether and when it collapsed.
+        let outcome = match curve.breakdown() {
+            Some(Breakdown::Collapse { time }) => {
+                format!(": collapsed at t/t₀ = {:.3}", time / curve.haff_t0)
+            }
+            _ if curve.tc == 0.0 => format!(": no collapse by t/t₀ = {t_end:.3}"),
+            _ => String::new(),
+        };
         let label = format!(
-            "{} ({step}): max |T/T_Haff − 1| = {:.1}%",
-            curve.method,
+            "{} ({step}){outcome}, max |T/T_Haff − 1| = {:.1}%",
+            method_label(&curve.method, curve.tc),
             100.0 * curve.haff_deviation
         );
         let style = colour.stroke_width(2);
@@ -476,6 +487,19 @@ fn plot_cooling_panel(
         chart
             .draw_series(points.iter().map(|&p| Circle::new(p, 3, colour.filled())))
             .map_err(|e| anyhow!("{e}"))?;
+        // The curve ends at the collapse (its last point): a cross marks it.
+        if let (Some(Breakdown::Collapse { .. }), Some(&end)) = (curve.breakdown(), points.last())
+        {
+            let drawn = chart
+                .draw_series([Cross::new(end, 10, colour.stroke_width(4))])
+                .map_err(|e| anyhow!("{e}"))?;
+            if !collapse_legend {
+                collapse_legend = true;
+                drawn
+                    .label("inelastic collapse: the event method stops")
+                    .legend(|(x, y)| Cross::new((x + 10, y), 7, BLACK.stroke_width(3)));
+            }
+        }
     }
     draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 13)?;
     Ok(())

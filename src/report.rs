@@ -5,7 +5,8 @@
 use std::fmt::Write as _;
 
 use crate::accuracy::{
-    AccuracyPoint, CoolingCurve, FAILURE_MISSED_FRACTION, HAFF_BREAKDOWN, PackingGroup,
+    AccuracyPoint, Breakdown, CoolingCurve, FAILURE_MISSED_FRACTION, HAFF_BREAKDOWN,
+    PackingGroup, method_label,
 };
 use crate::accuracy_figures::COOLING_FILE;
 use crate::analysis::{Baseline, Setup};
@@ -493,10 +494,13 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
                 m => cell(m, format!("{m:.2e}")),
             };
             let missed = bold_if(p.failed(), missed);
+            let method = match p.collapse_time {
+                t if t.is_finite() => format!("{}, **collapsed at t = {t:.4}**", method_label(&p.method, p.tc)),
+                _ => method_label(&p.method, p.tc),
+            };
             let _ = writeln!(
                 out,
-                "| {} | {} | {} | {:.4} | {:.1} | {:.3e} | {missed} | {:.3} | {:.4} | {} | {:.4} | {} |",
-                p.method,
+                "| {method} | {} | {} | {:.4} | {:.1} | {:.3e} | {missed} | {:.3} | {:.4} | {} | {:.4} | {} |",
                 p.dt,
                 cell(p.step_over_radius, format!("{:.3}", p.step_over_radius)),
                 p.wall_s,
@@ -512,7 +516,8 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
         if let Some(reference) = &group.reference {
             let _ = writeln!(
                 out,
-                "| event | exact | — | {:.4} | {:.1} | {:.3e} | 0 | {:.1e} | {:.4} | reference | {:.4} | reference |",
+                "| {} | exact | — | {:.4} | {:.1} | {:.3e} | 0 | {:.1e} | {:.4} | reference | {:.4} | reference |",
+                method_label(&reference.method, reference.tc),
                 reference.wall_s,
                 reference.sim_time_per_s,
                 reference.particle_steps_per_s,
@@ -521,7 +526,7 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
                 reference.collision_rate,
             );
         }
-        for point in &group.steps {
+        for point in group.events.iter().chain(&group.steps) {
             row(out, point);
         }
         let _ = writeln!(out);
@@ -559,34 +564,49 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
     }
 }
 
-/// The e < 1 runs against Haff's law: a table, and the cooling figure.
+/// The e < 1 runs against Haff's law: a table saying whether and when each run broke
+/// down, and the cooling figure.
 fn cooling_section(out: &mut String, curves: &[CoolingCurve]) {
     let _ = writeln!(
         out,
         "## Cooling (e < 1): energy against time and Haff's law\n\n\
          T = kinetic energy per disk, sampled at 40 steps. Haff's law T₀/(1 + t/t₀)² with \
-         t₀ fitted to the event run of each packing (least squares on √(T₀/T) − 1 = t/t₀); a \
-         run breaks down (**bold**) where its T departs from the law by more than {:.0}%.\n",
+         t₀ fitted to the guarded event run of each packing (least squares on \
+         √(T₀/T) − 1 = t/t₀). A run breaks down (**bold**) where its T first departs from \
+         the law by more than {:.0}%, or, for the event method, where it detects inelastic \
+         collapse (infinitely many collisions in finite time: with the TC guard off, \
+         tc = 0, the method itself fails there and the run stops).\n",
         100.0 * HAFF_BREAKDOWN
     );
     let _ = writeln!(
         out,
-        "| packing | method | dt | v_rms·dt/r | t_end/t₀ | T_end/T₀ | Haff's T_end/T₀ | max deviation from Haff | TC guard fired |\n\
-         | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+        "| packing | method | dt | v_rms·dt/r | t_end/t₀ | T_end/T₀ | Haff's T_end/T₀ | max deviation from Haff | TC guard fired | broke down |\n\
+         | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |"
     );
     for curve in curves {
         let [t_end, temperature_end] = curve.points[curve.points.len() - 1];
         let t_zero = curve.points[0][1];
         let deviation = format!("{:.2}%", 100.0 * curve.haff_deviation);
-        let deviation = bold_if(curve.broke_down(), deviation);
+        let deviation = bold_if(curve.haff_deviation > HAFF_BREAKDOWN, deviation);
+        let t0 = curve.haff_t0;
+        let breakdown = match curve.breakdown() {
+            None => format!("no (to t/t₀ = {:.3})", t_end / t0),
+            Some(Breakdown::Collapse { time }) => format!(
+                "**collapsed at t/t₀ = {:.3}** (t = {time:.4})",
+                time / t0
+            ),
+            Some(Breakdown::OffHaff { time }) => {
+                format!("**off Haff by > {:.0}% from t/t₀ = {:.3}**", 100.0 * HAFF_BREAKDOWN, time / t0)
+            }
+        };
         let _ = writeln!(
             out,
-            "| {:.2} | {} | {} | {:.3} | {:.3} | {:.4} | {:.4} | {deviation} | {} |",
+            "| {:.2} | {} | {} | {:.3} | {:.3} | {:.4} | {:.4} | {deviation} | {} | {breakdown} |",
             curve.packing,
-            curve.method,
+            method_label(&curve.method, curve.tc),
             curve.dt,
             curve.step_over_radius,
-            t_end / curve.haff_t0,
+            t_end / t0,
             temperature_end / t_zero,
             curve.haff(t_end) / t_zero,
             curve
