@@ -465,6 +465,96 @@ fn the_report_says_what_method_and_dt_auto_chose() {
     assert!(text.contains("method auto: event, cheaper"), "{text}");
 }
 
+/// A cooling curve as JSON text: T = 0.5/(1 + rate·t/10)² at t = 0, 0.5, … (`samples`
+/// of them after t = 0), every other point raised by the fraction `wobble`.
+fn haff_curve(rate: f64, wobble: f64, samples: usize) -> String {
+    let points: Vec<[f64; 2]> = (0..=samples)
+        .map(|i| {
+            let t = 0.5 * i as f64;
+            [
+                t,
+                0.5 * (1.0 + wobble * (i % 2) as f64) / (1.0 + rate * t / 10.0).powi(2),
+            ]
+        })
+        .collect();
+    serde_json::to_string(&points).unwrap()
+}
+
+#[test]
+fn the_cooling_report_says_whether_and_when_each_run_broke_down_and_marks_the_collapse() {
+    use collide::accuracy::{self, Breakdown};
+    use collide::accuracy_figures;
+    let template = records()
+        .into_iter()
+        .find(|r| r.backend == "serial")
+        .unwrap();
+    // Two event runs at the same dt that differ only in tc: the guarded one follows
+    // Haff's law (t₀ = 10) to t = 20; the unguarded one follows it too but collapsed at
+    // t = 12, where its curve ends. The large step cools twice as fast.
+    let mut records = Vec::new();
+    for (method, tc, collapse, text) in [
+        ("event", 0.0, 12.0, haff_curve(1.0, 0.0, 24)),
+        ("step", f64::NAN, f64::NAN, haff_curve(2.0, 0.0, 40)),
+        ("event", 1e-4, f64::NAN, haff_curve(1.0, 0.0, 40)),
+    ] {
+        let mut record = template.clone();
+        record.method = method.into();
+        record.dt = 0.5;
+        record.packing = 0.1;
+        record.rms_step_over_radius = 0.5;
+        record.tc = tc;
+        record.collapse_time = collapse;
+        record.temperature_curve = text;
+        records.push(record);
+    }
+    let curves = accuracy::cooling(&records);
+    let order: Vec<(&str, f64)> = curves.iter().map(|c| (c.method.as_str(), c.tc)).collect();
+    assert_eq!(order.len(), 3, "runs differing in tc stay apart: {order:?}");
+    assert_eq!((order[0], order[1].1), (("event", 1e-4), 0.0));
+    // t₀ comes from the guarded run, not the collapsed one.
+    assert!((curves[0].haff_t0 - 10.0).abs() < 1e-9);
+    assert_eq!(curves[0].breakdown(), None);
+    assert_eq!(curves[1].breakdown(), Some(Breakdown::Collapse { time: 12.0 }));
+    // The large step is 5.1% off at t = 0.5 already: ((1 + 0.05)/(1 + 0.1))² = 0.911.
+    assert_eq!(curves[2].breakdown(), Some(Breakdown::OffHaff { time: 0.5 }));
+
+    let dir = tempfile::tempdir().unwrap();
+    let path = accuracy_figures::draw_cooling(&curves, dir.path()).unwrap();
+    let image = image::open(&path).unwrap().to_rgb8();
+    // The collapsed run (the palette's red) ends in a cross 4 px wide: more red than its
+    // 24-point line alone, which is dashed (it broke down).
+    let red = image.pixels().filter(|p| p.0 == [0xd6, 0x27, 0x28]).count();
+    assert!(red > 200, "{red}");
+
+    let section = report::AccuracySection {
+        groups: accuracy::analyse(&records),
+        figures: Vec::new(),
+        cooling: curves,
+    };
+    let event_rows: Vec<String> = section.groups[0]
+        .events
+        .iter()
+        .map(|p| accuracy::method_label(&p.method, p.tc))
+        .collect();
+    assert_eq!(event_rows, ["event, tc = 0"]);
+    let pictures = report::Pictures {
+        figures: Vec::new(),
+        scene: None,
+        accuracy: Some(section),
+    };
+    let setups = analysis::analyse(&records).unwrap();
+    let text = report::markdown(&records, &setups, "results/cooling/", &pictures);
+    for row in [
+        "| 0.10 | event, tc = 0.0001 | 0.5 | 0.500 | 2.000 | 0.1111 | 0.1111 | 0.00% | — | no (to t/t₀ = 2.000) |",
+        "| 0.10 | event, tc = 0 | 0.5 | 0.500 | 1.200 | 0.2066 | 0.2066 | 0.00% | — | **collapsed at t/t₀ = 1.200** (t = 12.0000) |",
+        "| 0.10 | step | 0.5 | 0.500 | 2.000 | 0.0400 | 0.1111 | **64.00%** | — | **off Haff by > 5% from t/t₀ = 0.050** |",
+        "| event, tc = 0.0001 | exact | — |",
+        "| event, tc = 0, **collapsed at t = 12.0000** | 0.5 |",
+    ] {
+        assert!(text.contains(row), "missing {row}\n{text}");
+    }
+}
+
 #[test]
 fn the_cooling_chart_compares_each_method_with_haffs_law_and_marks_breakdowns() {
     use collide::{accuracy, accuracy_figures};
@@ -474,18 +564,7 @@ fn the_cooling_chart_compares_each_method_with_haffs_law_and_marks_breakdowns() 
         .unwrap();
     // The event run follows Haff's law with t₀ = 10 exactly; the small step within 1%;
     // the large step loses energy twice as fast (T₀/(1 + 2t/t₀)²): a breakdown.
-    let curve = |rate: f64, wobble: f64| {
-        let points: Vec<[f64; 2]> = (0..=40)
-            .map(|i| {
-                let t = 0.5 * i as f64;
-                [
-                    t,
-                    0.5 * (1.0 + wobble * (i % 2) as f64) / (1.0 + rate * t / 10.0).powi(2),
-                ]
-            })
-            .collect();
-        serde_json::to_string(&points).unwrap()
-    };
+    let curve = |rate: f64, wobble: f64| haff_curve(rate, wobble, 40);
     let mut records = Vec::new();
     for (method, dt, text) in [
         ("step", 0.5, curve(2.0, 0.0)),
