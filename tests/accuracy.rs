@@ -281,6 +281,42 @@ fn a_perfectly_inelastic_dense_gas_runs_to_the_end() {
     );
 }
 
+#[test]
+fn a_collapsed_run_ends_early_with_status_ok_and_says_when() {
+    // The three disks of the test above, through the serial backend: 100 intervals of
+    // 0.5 asked for, the collapse (t ≈ 8.4) falls in interval 17.
+    let text = "[scene]\nsize = [100.0, 100.0]\nrestitution = 0.05\n\
+                [[scene.particle]]\nx = 40.0\ny = 50.0\nvx = 1.0\n\
+                [[scene.particle]]\nx = 49.0\ny = 50.0\n\
+                [[scene.particle]]\nx = 60.0\ny = 50.0\nvx = -1.0\n\
+                [method]\nmethod = \"event\"\ndt = 0.5\nsteps = 100\n";
+    let run = |tc: f64| {
+        let overrides = Overrides {
+            tc: Some(tc),
+            ..Overrides::default()
+        };
+        let spec = scene_file::parse(Path::new("three.toml"), text, &overrides).unwrap();
+        serial::run(&spec).unwrap().summary
+    };
+    let collapsed = run(0.0);
+    let time = collapsed.collapse_time.expect("collapse detected");
+    assert_eq!(collapsed.time_reached, Some(time));
+    assert_eq!(collapsed.tc, Some(0.0));
+    assert_eq!(collapsed.steps, (time / 0.5).ceil() as u64);
+    let curve = collapsed.temperature_curve.as_ref().unwrap();
+    assert_eq!(curve.last().unwrap()[0], time, "the cooling curve ends at the collapse");
+    assert!(
+        collapsed.to_string().contains(&format!(
+            "inelastic collapse detected at t = {time:.6e}: the event method stopped there, in step {}",
+            collapsed.steps
+        )),
+        "{collapsed}"
+    );
+    let guarded = run(1e-3);
+    assert_eq!(guarded.collapse_time, None);
+    assert_eq!((guarded.steps, guarded.time_reached), (100, Some(50.0)));
+}
+
 fn run_scene_text(text: &str, method: Method, observe: Observe) -> collide::summary::RunSummary {
     let overrides = Overrides {
         method: Some(MethodChoice::Fixed(method)),
