@@ -488,46 +488,56 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
             out,
             "| method | dt | v_rms·dt/r | wall s | sim time / s | particle-steps/s | missed fraction | max overlap | Z | Z error | ω | ω error |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
         );
-        let row = |out: &mut String, p: &AccuracyPoint| {
+        // One row per point; the event method has no step (exact times), misses nothing
+        // and overlaps only by rounding; the reference has no error of its own.
+        let row = |out: &mut String, p: &AccuracyPoint, is_reference: bool| {
+            let is_event = p.method == "event";
             let missed = match p.missed_fraction {
+                _ if is_event => "0".to_owned(),
                 0.0 => "0".to_owned(),
                 m => cell(m, format!("{m:.2e}")),
             };
             let missed = bold_if(p.failed(), missed);
             let method = match p.collapse_time {
-                t if t.is_finite() => format!("{}, **collapsed at t = {t:.4}**", method_label(&p.method, p.tc)),
+                t if t.is_finite() => format!(
+                    "{}, **collapsed at t = {t:.4}**",
+                    method_label(&p.method, p.tc)
+                ),
                 _ => method_label(&p.method, p.tc),
+            };
+            let (dt, step, overlap) = if is_event {
+                ("exact".to_owned(), "—".to_owned(), format!("{:.1e}", p.max_overlap))
+            } else {
+                (
+                    p.dt.to_string(),
+                    cell(p.step_over_radius, format!("{:.3}", p.step_over_radius)),
+                    format!("{:.3}", p.max_overlap),
+                )
+            };
+            let error = |value: f64| {
+                if is_reference {
+                    "reference".to_owned()
+                } else {
+                    cell(value, format!("{:+.2}%", 100.0 * value))
+                }
             };
             let _ = writeln!(
                 out,
-                "| {method} | {} | {} | {:.4} | {:.1} | {:.3e} | {missed} | {:.3} | {:.4} | {} | {:.4} | {} |",
-                p.dt,
-                cell(p.step_over_radius, format!("{:.3}", p.step_over_radius)),
+                "| {method} | {dt} | {step} | {:.4} | {:.1} | {:.3e} | {missed} | {overlap} | {:.4} | {} | {:.4} | {} |",
                 p.wall_s,
                 p.sim_time_per_s,
                 p.particle_steps_per_s,
-                p.max_overlap,
                 p.compressibility_z,
-                cell(p.z_error, format!("{:+.2}%", 100.0 * p.z_error)),
+                error(p.z_error),
                 p.collision_rate,
-                cell(p.rate_error, format!("{:+.2}%", 100.0 * p.rate_error)),
+                error(p.rate_error),
             );
         };
         if let Some(reference) = &group.reference {
-            let _ = writeln!(
-                out,
-                "| {} | exact | — | {:.4} | {:.1} | {:.3e} | 0 | {:.1e} | {:.4} | reference | {:.4} | reference |",
-                method_label(&reference.method, reference.tc),
-                reference.wall_s,
-                reference.sim_time_per_s,
-                reference.particle_steps_per_s,
-                reference.max_overlap,
-                reference.compressibility_z,
-                reference.collision_rate,
-            );
+            row(out, reference, true);
         }
         for point in group.events.iter().chain(&group.steps) {
-            row(out, point);
+            row(out, point, false);
         }
         let _ = writeln!(out);
         match group.steps.iter().rev().find(|p| p.failed()) {
