@@ -10,8 +10,8 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::accuracy::{
-    AccuracyPoint, Breakdown, CoolingCurve, FAILURE_MISSED_FRACTION, PackingGroup,
-    method_label, pareto_front,
+    AccuracyPoint, Breakdown, CoolingCurve, FAILURE_MISSED_FRACTION, PackingGroup, method_label,
+    pareto_front,
 };
 use crate::figures::{FONT, PALETTE, draw_legend, register_font};
 
@@ -488,8 +488,7 @@ fn plot_cooling_panel(
             .draw_series(points.iter().map(|&p| Circle::new(p, 3, colour.filled())))
             .map_err(|e| anyhow!("{e}"))?;
         // The curve ends at the collapse (its last point): a cross marks it.
-        if let (Some(Breakdown::Collapse { .. }), Some(&end)) = (curve.breakdown(), points.last())
-        {
+        if let (Some(Breakdown::Collapse { .. }), Some(&end)) = (curve.breakdown(), points.last()) {
             let drawn = chart
                 .draw_series([Cross::new(end, 10, colour.stroke_width(4))])
                 .map_err(|e| anyhow!("{e}"))?;

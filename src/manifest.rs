@@ -659,9 +659,17 @@ mod tests {
         let swept = study(
             "[sweep]\nmethod = [\"event\", \"event\"]\ntc = [1e-4, 0.0]\nzip = [\"method\", \"tc\"]\n[backends]\nserial = true\n",
         );
-        let tcs: Vec<Option<f64>> = swept.configurations.iter().map(|c| c.overrides.tc).collect();
+        let tcs: Vec<Option<f64>> = swept
+            .configurations
+            .iter()
+            .map(|c| c.overrides.tc)
+            .collect();
         assert_eq!(tcs, [Some(1e-4), Some(0.0)]);
-        let keys: Vec<String> = swept.configurations.iter().map(Configuration::key).collect();
+        let keys: Vec<String> = swept
+            .configurations
+            .iter()
+            .map(Configuration::key)
+            .collect();
         assert!(keys[0].ends_with(";method=event;tc=0.0001"), "{keys:?}");
         assert!(keys[1].ends_with(";method=event;tc=0"), "{keys:?}");
         let args = swept.configurations[1].simulate_args();
@@ -674,12 +682,13 @@ mod tests {
         .unwrap();
         assert_eq!(spec.method.tc, Some(0.0));
         // A negative tc names the scene, the sweep value and the fix.
-        let bad = format!(
-            "name = \"m\"\n[sweep]\ntc = [-1.0]\n[backends]\nserial = true\n{INLINE}"
-        );
+        let bad =
+            format!("name = \"m\"\n[sweep]\ntc = [-1.0]\n[backends]\nserial = true\n{INLINE}");
         let err = parse(Path::new("m.toml"), &bad).unwrap_err().to_string();
         assert!(
-            err.contains("tc = -1") && err.contains("method.tc") && err.contains("0 turns the guard off"),
+            err.contains("tc = -1")
+                && err.contains("method.tc")
+                && err.contains("0 turns the guard off"),
             "{err}"
         );
         let empty = format!("name = \"m\"\n[sweep]\ntc = []\n[backends]\nserial = true\n{INLINE}");

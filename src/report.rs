@@ -5,8 +5,8 @@
 use std::fmt::Write as _;
 
 use crate::accuracy::{
-    AccuracyPoint, Breakdown, CoolingCurve, FAILURE_MISSED_FRACTION, HAFF_BREAKDOWN,
-    PackingGroup, method_label,
+    AccuracyPoint, Breakdown, CoolingCurve, FAILURE_MISSED_FRACTION, HAFF_BREAKDOWN, PackingGroup,
+    method_label,
 };
 use crate::accuracy_figures::COOLING_FILE;
 use crate::analysis::{Baseline, Setup};
@@ -506,7 +506,11 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
                 _ => method_label(&p.method, p.tc),
             };
             let (dt, step, overlap) = if is_event {
-                ("exact".to_owned(), "—".to_owned(), format!("{:.1e}", p.max_overlap))
+                (
+                    "exact".to_owned(),
+                    "—".to_owned(),
+                    format!("{:.1e}", p.max_overlap),
+                )
             } else {
                 (
                     p.dt.to_string(),
@@ -601,12 +605,15 @@ fn cooling_section(out: &mut String, curves: &[CoolingCurve]) {
         let t0 = curve.haff_t0;
         let breakdown = match curve.breakdown() {
             None => format!("no (to t/t₀ = {:.3})", t_end / t0),
-            Some(Breakdown::Collapse { time }) => format!(
-                "**collapsed at t/t₀ = {:.3}** (t = {time:.4})",
-                time / t0
-            ),
+            Some(Breakdown::Collapse { time }) => {
+                format!("**collapsed at t/t₀ = {:.3}** (t = {time:.4})", time / t0)
+            }
             Some(Breakdown::OffHaff { time }) => {
-                format!("**off Haff by > {:.0}% from t/t₀ = {:.3}**", 100.0 * HAFF_BREAKDOWN, time / t0)
+                format!(
+                    "**off Haff by > {:.0}% from t/t₀ = {:.3}**",
+                    100.0 * HAFF_BREAKDOWN,
+                    time / t0
+                )
             }
         };
         let _ = writeln!(

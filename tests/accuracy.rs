@@ -223,10 +223,15 @@ fn three_disks_in_a_row_collapse_without_the_guard_and_not_with_it() {
     // middle disk rattles between the outer two at geometrically shorter intervals.
     let (mut sim, mut particles) = three_in_a_row(0.05, 0.0);
     sim.advance_to(&mut particles, 100.0);
-    let collapse = sim.collapse_time().expect("e = 0.05 without the guard collapses");
+    let collapse = sim
+        .collapse_time()
+        .expect("e = 0.05 without the guard collapses");
     // The first collision is at t = 7 (gap 7 closed at speed 1); the rattling then
     // converges within a few time units. The state is left at the collapse.
-    assert!(collapse > 7.0 && collapse < 20.0, "collapse at t = {collapse}");
+    assert!(
+        collapse > 7.0 && collapse < 20.0,
+        "collapse at t = {collapse}"
+    );
     assert_eq!(sim.time(), collapse);
     // At a collapse every gap has closed (to rounding) and, the total momentum being 0,
     // the three have all but stopped: their speeds fell from 1 by about the factor the
@@ -304,7 +309,11 @@ fn a_collapsed_run_ends_early_with_status_ok_and_says_when() {
     assert_eq!(collapsed.tc, Some(0.0));
     assert_eq!(collapsed.steps, (time / 0.5).ceil() as u64);
     let curve = collapsed.temperature_curve.as_ref().unwrap();
-    assert_eq!(curve.last().unwrap()[0], time, "the cooling curve ends at the collapse");
+    assert_eq!(
+        curve.last().unwrap()[0],
+        time,
+        "the cooling curve ends at the collapse"
+    );
     assert!(
         collapsed.to_string().contains(&format!(
             "inelastic collapse detected at t = {time:.6e}: the event method stopped there, in step {}",

@@ -514,9 +514,15 @@ fn the_cooling_report_says_whether_and_when_each_run_broke_down_and_marks_the_co
     // t₀ comes from the guarded run, not the collapsed one.
     assert!((curves[0].haff_t0 - 10.0).abs() < 1e-9);
     assert_eq!(curves[0].breakdown(), None);
-    assert_eq!(curves[1].breakdown(), Some(Breakdown::Collapse { time: 12.0 }));
+    assert_eq!(
+        curves[1].breakdown(),
+        Some(Breakdown::Collapse { time: 12.0 })
+    );
     // The large step is 5.1% off at t = 0.5 already: ((1 + 0.05)/(1 + 0.1))² = 0.911.
-    assert_eq!(curves[2].breakdown(), Some(Breakdown::OffHaff { time: 0.5 }));
+    assert_eq!(
+        curves[2].breakdown(),
+        Some(Breakdown::OffHaff { time: 0.5 })
+    );
 
     // The collapsed run (the palette's red) ends in a cross: drawn without its collapse
     // time (the same points, dashed all the same since they are 10% off Haff's law) the
@@ -525,15 +531,15 @@ fn the_cooling_report_says_whether_and_when_each_run_broke_down_and_marks_the_co
         let dir = tempfile::tempdir().unwrap();
         let path = accuracy_figures::draw_cooling(curves, dir.path()).unwrap();
         let image = image::open(&path).unwrap().to_rgb8();
-        image
-            .pixels()
-            .filter(|p| p.0 == [0xd6, 0x27, 0x28])
-            .count()
+        image.pixels().filter(|p| p.0 == [0xd6, 0x27, 0x28]).count()
     };
     let mut unmarked = curves.clone();
     unmarked[1].collapse_time = f64::NAN;
     let (marked, plain) = (red_pixels(&curves), red_pixels(&unmarked));
-    assert!(marked > plain + 50, "{marked} red pixels with the cross, {plain} without");
+    assert!(
+        marked > plain + 50,
+        "{marked} red pixels with the cross, {plain} without"
+    );
 
     let section = report::AccuracySection {
         groups: accuracy::analyse(&records),

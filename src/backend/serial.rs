@@ -5,8 +5,8 @@ use std::ops::ControlFlow;
 use std::time::Instant;
 
 use crate::backend::{
-    Accuracy, BackendError, Collapse, CpuScope, Measured, RunOutcome, StageSeconds, Workers, is_curve_sample,
-    step_loop, summarize, timed,
+    Accuracy, BackendError, Collapse, CpuScope, Measured, RunOutcome, StageSeconds, Workers,
+    is_curve_sample, step_loop, summarize, timed,
 };
 use crate::sim::Particles;
 use crate::sim::Stepper;
