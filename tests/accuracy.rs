@@ -12,8 +12,8 @@ use collide::backend::serial;
 use collide::scene_file::{self, Overrides};
 use collide::sim::event::{EventParams, EventSim};
 use collide::sim::scene::{GasSpec, Placement};
-use collide::sim::{Boundary, Disk, Domain, Particles, Physics, Scene};
-use collide::spec::{Method, MethodChoice, Observe};
+use collide::sim::{Boundary, Particles, Physics, Scene};
+use collide::spec::{Method, MethodChoice, Observe, SceneSource};
 
 use crate::cli::{collide as run_collide, json_summary, scene_file as write_scene};
 
@@ -190,30 +190,33 @@ fn inelastic_gas_cools_by_haffs_law_early_on() {
     assert_eq!(sim.collapse_time(), None);
 }
 
-/// Three unit disks on one line in a walled box, the outer two closing in on the middle
-/// one (off centre, so no two collisions coincide), at restitution `e` and TC time `tc`.
+/// Three unit disks on one line in a 100 × 100 walled box, the outer two closing in on
+/// the middle one (off centre, so no two collisions coincide), at restitution `e`: 100
+/// intervals of 0.5 of the event method.
+fn three_in_a_row_text(e: f64) -> String {
+    format!(
+        "[scene]\nsize = [100.0, 100.0]\nrestitution = {e}\n\
+         [[scene.particle]]\nx = 40.0\ny = 50.0\nvx = 1.0\n\
+         [[scene.particle]]\nx = 49.0\ny = 50.0\n\
+         [[scene.particle]]\nx = 60.0\ny = 50.0\nvx = -1.0\n\
+         [method]\nmethod = \"event\"\ndt = 0.5\nsteps = 100\n"
+    )
+}
+
+/// The three disks of [`three_in_a_row_text`] in an event simulation with TC time `tc`.
 fn three_in_a_row(e: f64, tc: f64) -> (EventSim, Particles) {
-    let disk = |x, vx| Disk {
-        x,
-        y: 50.0,
-        vx,
-        vy: 0.0,
-        radius: 1.0,
-        mass: 1.0,
-    };
-    let particles = Particles::from_disks(&[disk(40.0, 1.0), disk(49.0, 0.0), disk(60.0, -1.0)]);
-    let domain = Domain {
-        width: 100.0,
-        height: 100.0,
-        boundary: Boundary::Walls,
+    let text = three_in_a_row_text(e);
+    let spec = scene_file::parse(Path::new("three.toml"), &text, &Overrides::default()).unwrap();
+    let SceneSource::Explicit(scene) = spec.scene else {
+        panic!("explicit disks")
     };
     let sim = EventSim::new(
-        domain,
-        Physics::with_restitution(e),
+        scene.domain,
+        scene.physics,
         EventParams { tc },
-        &particles,
+        &scene.particles,
     );
-    (sim, particles)
+    (sim, scene.particles)
 }
 
 #[test]
@@ -290,17 +293,13 @@ fn a_perfectly_inelastic_dense_gas_runs_to_the_end() {
 fn a_collapsed_run_ends_early_with_status_ok_and_says_when() {
     // The three disks of the test above, through the serial backend: 100 intervals of
     // 0.5 asked for, the collapse (t ≈ 8.4) falls in interval 17.
-    let text = "[scene]\nsize = [100.0, 100.0]\nrestitution = 0.05\n\
-                [[scene.particle]]\nx = 40.0\ny = 50.0\nvx = 1.0\n\
-                [[scene.particle]]\nx = 49.0\ny = 50.0\n\
-                [[scene.particle]]\nx = 60.0\ny = 50.0\nvx = -1.0\n\
-                [method]\nmethod = \"event\"\ndt = 0.5\nsteps = 100\n";
+    let text = three_in_a_row_text(0.05);
     let run = |tc: f64| {
         let overrides = Overrides {
             tc: Some(tc),
             ..Overrides::default()
         };
-        let spec = scene_file::parse(Path::new("three.toml"), text, &overrides).unwrap();
+        let spec = scene_file::parse(Path::new("three.toml"), &text, &overrides).unwrap();
         serial::run(&spec).unwrap().summary
     };
     let collapsed = run(0.0);

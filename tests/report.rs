@@ -358,10 +358,7 @@ fn a_file_missing_a_measured_column_or_from_a_newer_collide_is_refused_with_the_
 /// reference and the step method at v_rms·dt/r = 1, 0.1 and 0.01, whose missed
 /// fraction and pressure error shrink with dt (1 and 0.1 fail, 0.01 passes).
 fn accuracy_records() -> Vec<Record> {
-    let template = records()
-        .into_iter()
-        .find(|r| r.backend == "serial")
-        .unwrap();
+    let template = serial_record();
     let mut out = Vec::new();
     for packing in [0.05, 0.4] {
         for (method, dt, missed, z_factor, wall_s) in [
@@ -480,14 +477,19 @@ fn haff_curve(rate: f64, wobble: f64, samples: usize) -> String {
     serde_json::to_string(&points).unwrap()
 }
 
+/// A successful serial record of the fixed set, to vary.
+fn serial_record() -> Record {
+    records()
+        .into_iter()
+        .find(|r| r.backend == "serial")
+        .unwrap()
+}
+
 #[test]
 fn the_cooling_report_says_whether_and_when_each_run_broke_down_and_marks_the_collapse() {
     use collide::accuracy::{self, Breakdown};
     use collide::accuracy_figures;
-    let template = records()
-        .into_iter()
-        .find(|r| r.backend == "serial")
-        .unwrap();
+    let template = serial_record();
     // Two event runs at the same dt that differ only in tc: the guarded one follows
     // Haff's law (t₀ = 10) to t = 20; the unguarded one wobbles 10% about it and
     // collapsed at t = 12, where its curve ends. The large step cools twice as fast.
@@ -573,10 +575,7 @@ fn the_cooling_report_says_whether_and_when_each_run_broke_down_and_marks_the_co
 #[test]
 fn the_cooling_chart_compares_each_method_with_haffs_law_and_marks_breakdowns() {
     use collide::{accuracy, accuracy_figures};
-    let template = records()
-        .into_iter()
-        .find(|r| r.backend == "serial")
-        .unwrap();
+    let template = serial_record();
     // The event run follows Haff's law with t₀ = 10 exactly; the small step within 1%;
     // the large step loses energy twice as fast (T₀/(1 + 2t/t₀)²): a breakdown.
     let curve = |rate: f64, wobble: f64| haff_curve(rate, wobble, 40);
