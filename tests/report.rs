@@ -477,6 +477,17 @@ fn haff_curve(rate: f64, wobble: f64, samples: usize) -> String {
     serde_json::to_string(&points).unwrap()
 }
 
+/// The markdown report of a cooling study's records with its accuracy section.
+fn cooling_report(records: &[Record], section: report::AccuracySection) -> String {
+    let pictures = report::Pictures {
+        figures: Vec::new(),
+        scene: None,
+        accuracy: Some(section),
+    };
+    let setups = analysis::analyse(records).unwrap();
+    report::markdown(records, &setups, "results/cooling/", &pictures)
+}
+
 /// A successful serial record of the fixed set, to vary.
 fn serial_record() -> Record {
     records()
@@ -554,13 +565,7 @@ fn the_cooling_report_says_whether_and_when_each_run_broke_down_and_marks_the_co
         .map(|p| accuracy::method_label(&p.method, p.tc))
         .collect();
     assert_eq!(event_rows, ["event, tc = 0"]);
-    let pictures = report::Pictures {
-        figures: Vec::new(),
-        scene: None,
-        accuracy: Some(section),
-    };
-    let setups = analysis::analyse(&records).unwrap();
-    let text = report::markdown(&records, &setups, "results/cooling/", &pictures);
+    let text = cooling_report(&records, section);
     for row in [
         "| 0.10 | event, tc = 0.0001 | 0.5 | 0.500 | 2.000 | 0.1111 | 0.1111 | 0.00% | — | no (to t/t₀ = 2.000) |",
         "| 0.10 | event, tc = 0 | 0.5 | 0.500 | 1.200 | 0.2066 | 0.2066 | **10.00%** | — | **collapsed at t/t₀ = 1.200** (t = 12.0000) |",
@@ -618,13 +623,7 @@ fn the_cooling_chart_compares_each_method_with_haffs_law_and_marks_breakdowns() 
         figures: Vec::new(),
         cooling: curves,
     };
-    let pictures = report::Pictures {
-        figures: Vec::new(),
-        scene: None,
-        accuracy: Some(section),
-    };
-    let setups = analysis::analyse(&records).unwrap();
-    let text = report::markdown(&records, &setups, "results/cooling/", &pictures);
+    let text = cooling_report(&records, section);
     assert!(text.contains("## Cooling (e < 1)"), "{text}");
     assert!(
         text.contains("![accuracy-cooling.png](accuracy-cooling.png)"),
