@@ -8,7 +8,8 @@
 //!
 //! Throughput is in disks per iteration, so criterion's "elem/s" is particle-steps per second;
 //! in the `event` group it is collisions (pair and wall) per second of the event-driven
-//! method at N = 10^4 and 10^5 in a periodic box.
+//! method. The `step` and `event` groups run both methods on the same periodic gases at
+//! N = 10^4, 10^5 and 10^6: they are the cost model of `method = "auto"`.
 //! Run: `cargo bench --bench kernels` (MPI runs need `mpirun`: see the README's Speed section).
 
 use std::time::Duration;
@@ -214,23 +215,42 @@ fn backend_steps(c: &mut Criterion) {
     group.finish();
 }
 
-/// Event-driven throughput: each iteration processes a fixed number of collisions (pair
-/// and wall) of an elastic periodic gas after a warm-up of one collision per disk, so
-/// "elem/s" is collisions per second on one core (cell crossings are work, not counted).
-fn event_throughput(c: &mut Criterion) {
+/// The cost model of `method = "auto"` (`collide::auto::MEASURED`): both methods on the
+/// same periodic gases of unit disks at N = 10⁴, 10⁵ and 10⁶, packing 0.05 and 0.3, in
+/// one run. `step/…` is one serial step (elem/s: particle-steps per second); `event/…`
+/// processes a fixed number of collisions (pair and wall) after a warm-up of one
+/// collision per disk (elem/s: collisions per second on one core; cell crossings are
+/// work, not counted).
+fn cost_model(c: &mut Criterion) {
     const COLLISIONS: u64 = 100_000;
+    const SIZES: [usize; 3] = [10_000, 100_000, 1_000_000];
+    let periodic_gas = |n: usize, packing: f64| {
+        GasSpec {
+            seed: 42,
+            boundary: Boundary::Periodic,
+            ..GasSpec::unit(n, packing)
+        }
+        .build()
+        .expect("packings below jamming place")
+    };
+    let mut group = c.benchmark_group("step");
+    group.sample_size(10);
+    for n in SIZES {
+        group.throughput(Throughput::Elements(n as u64));
+        for packing in [0.05, 0.3] {
+            let (mut particles, mut stepper) = warmed_up_serial(&periodic_gas(n, packing));
+            group.bench_function(BenchmarkId::new(format!("n{n}"), packing), |b| {
+                b.iter(|| stepper.step(&mut particles));
+            });
+        }
+    }
+    group.finish();
     let mut group = c.benchmark_group("event");
     group.throughput(Throughput::Elements(COLLISIONS));
     group.sample_size(10);
-    for n in [10_000, 100_000] {
+    for n in SIZES {
         for packing in [0.05, 0.3] {
-            let scene = GasSpec {
-                seed: 42,
-                boundary: Boundary::Periodic,
-                ..GasSpec::unit(n, packing)
-            }
-            .build()
-            .expect("packings below jamming place");
+            let scene = periodic_gas(n, packing);
             let params = EventParams { tc: 0.0 };
             let mut sim = EventSim::new(scene.domain, scene.physics, params, &scene.particles);
             sim.advance_collisions(n as u64);
@@ -286,6 +306,6 @@ criterion_group!(
     serial_kernels,
     backend_steps,
     distributed_step,
-    event_throughput
+    cost_model
 );
 criterion_main!(benches);

@@ -31,13 +31,70 @@ const MAX_PILOT_STEPS: u64 = 8192;
 /// with this many disks (same seed, packing and speeds); other scenes run whole.
 pub const PILOT_DISKS: usize = 2000;
 
-/// Cost model, step method: particle-steps per second of one serial step at N = 10⁵,
-/// packing 0.05 (README, Speed: `serial/step`, 28.4 M/s).
-pub const STEP_PARTICLE_STEPS_PER_S: f64 = 28.4e6;
+/// One point of the cost model: the serial throughput of each method on a periodic gas
+/// of unit disks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measured {
+    pub n: f64,
+    pub packing: f64,
+    /// Step method: particle-steps per second (`step/n…/…`).
+    pub step_particle_steps_per_s: f64,
+    /// Event method: pair and wall collisions per second (`event/n…/…`).
+    pub event_collisions_per_s: f64,
+}
 
-/// Cost model, event method: pair + wall collisions per second at N = 10⁴, packing 0.05
-/// (README, Accuracy: the event bench at load 2.6, 0.53 M/s).
-pub const EVENT_EVENTS_PER_S: f64 = 0.53e6;
+/// The cost model, measured in one run of
+/// `cargo bench --features mpi --bench kernels -- '^(step|event)/'` on one idle machine
+/// (README, Accuracy: choosing automatically), so that the two methods' rates compare
+/// even where the machine differs: by N (rows), packing 0.05 then 0.3.
+pub const MEASURED: [[Measured; 2]; 3] = [
+    [
+        measured(1e4, 0.05, 54.6e6, 1.03e6),
+        measured(1e4, 0.3, 39.2e6, 1.70e6),
+    ],
+    [
+        measured(1e5, 0.05, 40.3e6, 0.327e6),
+        measured(1e5, 0.3, 26.3e6, 0.727e6),
+    ],
+    [
+        measured(1e6, 0.05, 25.3e6, 0.256e6),
+        measured(1e6, 0.3, 20.8e6, 0.492e6),
+    ],
+];
+
+const fn measured(n: f64, packing: f64, step: f64, event: f64) -> Measured {
+    Measured {
+        n,
+        packing,
+        step_particle_steps_per_s: step,
+        event_collisions_per_s: event,
+    }
+}
+
+/// The cost model's rates for `n` disks at `packing`: interpolated between the measured
+/// points linearly in log N, in packing and in the log of each rate; beyond them, the
+/// nearest point's.
+pub fn cost_rates(n: f64, packing: f64) -> Measured {
+    let along = |value: f64, low: f64, high: f64| ((value - low) / (high - low)).clamp(0.0, 1.0);
+    let log_n = n.max(1.0).log10();
+    let rows = MEASURED.len() - 1;
+    let row_at = (0..rows)
+        .find(|&row| log_n <= MEASURED[row + 1][0].n.log10())
+        .unwrap_or(rows - 1);
+    let (low, high) = (&MEASURED[row_at], &MEASURED[row_at + 1]);
+    let u = along(log_n, low[0].n.log10(), high[0].n.log10());
+    let w = along(packing, low[0].packing, low[1].packing);
+    let mix = |rate: fn(&Measured) -> f64| {
+        let at = |row: &[Measured; 2]| rate(&row[0]).ln() * (1.0 - w) + rate(&row[1]).ln() * w;
+        (at(low) * (1.0 - u) + at(high) * u).exp()
+    };
+    Measured {
+        n,
+        packing,
+        step_particle_steps_per_s: mix(|m| m.step_particle_steps_per_s),
+        event_collisions_per_s: mix(|m| m.event_collisions_per_s),
+    }
+}
 
 /// The resolved method and step, and why (`None` when nothing was automatic).
 #[derive(Clone, Debug, PartialEq)]
@@ -160,17 +217,20 @@ pub fn choose(
         });
     }
     let n = scene.particles.len() as f64;
-    let step_cost = n * spec.steps as f64 / STEP_PARTICLE_STEPS_PER_S;
+    let rates = cost_rates(n, scene.packing());
+    let step_cost = n * spec.steps as f64 / rates.step_particle_steps_per_s;
     // Both methods run the same simulated time, steps × dt.
     let sim_time = spec.steps as f64 * step.dt;
     let events = event_pilot(pilot_scene, event, pilot_time) as f64;
     let events_per_disk_time = events / (pilot_scene.particles.len() as f64 * pilot_time);
-    let event_cost = events_per_disk_time * n * sim_time / EVENT_EVENTS_PER_S;
+    let event_cost = events_per_disk_time * n * sim_time / rates.event_collisions_per_s;
     let costs = format!(
-        "cost model (step {:.0} M particle-steps/s, event {:.2} M events/s): step {step_cost:.3e} s, \
-         event {event_cost:.3e} s ({events} events in the event pilot to t = {pilot_time:.4e})",
-        STEP_PARTICLE_STEPS_PER_S / 1e6,
-        EVENT_EVENTS_PER_S / 1e6,
+        "cost model at N = {n}, packing {:.3} (step {:.1} M particle-steps/s, event {:.2} M \
+         collisions/s): step {step_cost:.3e} s, event {event_cost:.3e} s ({events} collisions \
+         in the event pilot to t = {pilot_time:.4e})",
+        scene.packing(),
+        rates.step_particle_steps_per_s / 1e6,
+        rates.event_collisions_per_s / 1e6,
     );
     let choice = if step_passes && step_cost <= event_cost {
         Choice {
@@ -228,5 +288,65 @@ fn pilot_scene<'a>(
             Ok(Cow::Owned(small.build()?))
         }
         _ => Ok(Cow::Borrowed(scene)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: f64, b: f64) -> bool {
+        (a / b - 1.0).abs() < 1e-12
+    }
+
+    #[test]
+    fn cost_rates_are_the_measured_ones_at_the_measured_points_and_held_beyond() {
+        for row in &MEASURED {
+            for point in row {
+                let rates = cost_rates(point.n, point.packing);
+                assert!(close(
+                    rates.step_particle_steps_per_s,
+                    point.step_particle_steps_per_s
+                ));
+                assert!(close(
+                    rates.event_collisions_per_s,
+                    point.event_collisions_per_s
+                ));
+            }
+        }
+        let (first, last) = (&MEASURED[0][0], &MEASURED[2][1]);
+        let below = cost_rates(10.0, 0.01);
+        assert!(close(
+            below.event_collisions_per_s,
+            first.event_collisions_per_s
+        ));
+        let above = cost_rates(1e9, 0.6);
+        assert!(close(
+            above.step_particle_steps_per_s,
+            last.step_particle_steps_per_s
+        ));
+    }
+
+    #[test]
+    fn cost_rates_between_points_lie_between_them() {
+        // Halfway in log N and in packing between the first two rows: the geometric mean
+        // of the four corners.
+        let corners = [
+            MEASURED[0][0],
+            MEASURED[0][1],
+            MEASURED[1][0],
+            MEASURED[1][1],
+        ];
+        let rates = cost_rates((1e4f64 * 1e5).sqrt(), 0.175);
+        let mean =
+            |rate: fn(&Measured) -> f64| corners.iter().map(|m| rate(m).ln()).sum::<f64>() / 4.0;
+        assert!(close(
+            rates.event_collisions_per_s,
+            mean(|m| m.event_collisions_per_s).exp()
+        ));
+        assert!(close(
+            rates.step_particle_steps_per_s,
+            mean(|m| m.step_particle_steps_per_s).exp()
+        ));
     }
 }

@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use collide::auto::{EVENT_EVENTS_PER_S, STEP_PARTICLE_STEPS_PER_S};
+use collide::auto::cost_rates;
 use collide::backend::serial;
 use collide::scene_file::{self, Overrides};
 use collide::spec::{Method, MethodChoice, Observe};
@@ -47,12 +47,13 @@ fn method_auto_on_a_dilute_fast_gas_picks_what_the_cost_model_says() {
     // estimate is checked against this run's own event count (the pilot ran on the same
     // scene, so the count over the same time can differ only by the run being longer).
     let n = summary.n as f64;
-    let expected_step = n * summary.steps as f64 / STEP_PARTICLE_STEPS_PER_S;
+    let rates = cost_rates(n, 0.05);
+    let expected_step = n * summary.steps as f64 / rates.step_particle_steps_per_s;
     assert!((step_cost / expected_step - 1.0).abs() < 1e-3, "{choice}");
     let run_events = (summary.pair_collisions + summary.wall_collisions) as f64;
     // Tolerance 30%: the pilot's rate over ~25 time units against the run's over ~10.
     assert!(
-        (event_cost / (run_events / EVENT_EVENTS_PER_S) - 1.0).abs() < 0.3,
+        (event_cost / (run_events / rates.event_collisions_per_s) - 1.0).abs() < 0.3,
         "{choice}; run events {run_events}"
     );
     let expected = if step_cost <= event_cost {

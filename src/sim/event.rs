@@ -7,18 +7,20 @@
 //!   the disks of an event are brought to the event's time. [`EventSim::advance_to`]
 //!   brings every disk to the requested time and writes the state out.
 //! - **Cells** at least one contact diameter across (wider in sparse boxes: about one
-//!   disk per cell); a disk's cell changes exactly at its crossing events, so a pair can
-//!   only touch while in neighbouring cells. Pair predictions look at the 3 × 3
-//!   neighbourhood, with each neighbour's periodic image shift.
-//! - **Queue.** One pending event per disk, its earliest, kept in a tournament tree
-//!   (O(log N) update, O(1) minimum). A pair event records the partner's collision counter
+//!   disk per two cells); a disk's cell changes exactly at its crossing events, so a pair
+//!   can only touch while in neighbouring cells. Pair predictions look at the 3 × 3
+//!   neighbourhood, with each neighbour's periodic image shift, and test each candidate
+//!   without branching on the outcome.
+//! - **Queue.** One pending event per disk, its earliest, kept in a calendar queue
+//!   ([`EventCalendar`]: O(1) update and minimum). A pair event records the partner's collision counter
 //!   at prediction time; if the partner's velocity changed since, the event is stale and
 //!   the disk is predicted afresh when it comes up (lazy invalidation). A crossing does
 //!   not change a trajectory, so it keeps the best pair event found so far and only looks
 //!   at the cells that entered the neighbourhood.
-//! - **Memory order.** Every few events per disk the disks are re-stored cell by cell, so
-//!   a neighbourhood's disks lie close together in memory; the caller's storage order is
-//!   kept in `origin` and never changes.
+//! - **Memory order.** What a pair test reads of a disk fills one cache line ([`Flight`]),
+//!   the rest of its state another ([`Agenda`]). Every few events per disk the disks are
+//!   re-stored cell by cell, so a neighbourhood's disks lie close together in memory; the
+//!   caller's storage order is kept in `origin` and never changes.
 //! - **Contact physics** is the time-stepped method's impulse law
 //!   ([`exchange_along`]) along the line of centres at contact.
 //! - **Inelastic collapse** (e < 1): the TC model of Luding and McNamara — a collision is
@@ -30,6 +32,7 @@
 //! Gravity (parabolic flights) is not modelled: input validation refuses it with this
 //! method. Disks must start without overlaps (scene construction guarantees it).
 
+use super::calendar::EventCalendar;
 use super::cells::{CellList, NONE, Neighbour};
 use super::collapse::CollapseDetector;
 use super::collision::{PairSide, exchange_along};
@@ -37,9 +40,11 @@ use super::particles::Particles;
 use super::scene::{Boundary, Domain, Physics};
 use super::step::StepCounters;
 
-/// Cells hold about this many disks in sparse boxes (fewer crossings, more candidates;
-/// 1 did best of 0.4–3 in instruction counts at packings 0.05 and 0.3).
-const DISKS_PER_CELL: f64 = 1.0;
+/// Cells hold about this many disks in sparse boxes (bigger cells: fewer crossings, more
+/// candidates). 0.5 did best of 0.25–3 in cycles estimated by cachegrind (instructions,
+/// cache misses and mispredicted branches) at N = 10⁴ and 10⁵, packings 0.05 and 0.3;
+/// at 0.3 the cells are then one contact diameter wide, their minimum.
+const DISKS_PER_CELL: f64 = 0.5;
 
 /// Events between re-storings of the disks in cell order, per disk.
 const EVENTS_PER_DISK_BETWEEN_REORDERS: u64 = 8;
@@ -76,6 +81,19 @@ const NOTHING: Scheduled = Scheduled {
     kind: Kind::Nothing,
 };
 
+/// The earliest pair collision found so far in a search: its time and partner.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Nearest {
+    time: f64,
+    /// [`NONE`] when none was found.
+    partner: u32,
+}
+
+const NO_PARTNER: Nearest = Nearest {
+    time: f64::INFINITY,
+    partner: NONE,
+};
+
 impl Scheduled {
     #[inline(always)]
     fn earlier(self, other: Scheduled) -> Scheduled {
@@ -83,8 +101,8 @@ impl Scheduled {
     }
 }
 
-/// One disk's flight: its position at its local time `t` and its velocity. 64 bytes,
-/// what a pair prediction reads of a neighbour, in one cache line.
+/// One disk's flight: its position at its local time `t`, its velocity, and where it is:
+/// everything a pair prediction reads of a neighbour, in one cache line.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[repr(align(64))]
 struct Flight {
@@ -94,9 +112,23 @@ struct Flight {
     vy: f64,
     t: f64,
     radius: f64,
+    /// How many times the velocity changed (invalidates partners' predictions).
+    count: u32,
+    /// Column and row of its cell.
+    home: [u32; 2],
+}
+
+/// The rest of a disk's state, read only when it has an event: one more cache line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(align(64))]
+struct Agenda {
     mass: f64,
     /// Time of the disk's last pair collision (TC model).
     last_collision: f64,
+    /// The pending event (the one in the queue).
+    next: Scheduled,
+    /// The earliest pair event found since the velocity last changed.
+    best_pair: Scheduled,
 }
 
 impl Flight {
@@ -104,56 +136,6 @@ impl Flight {
     fn position_at(&self, time: f64) -> (f64, f64) {
         let dt = time - self.t;
         (self.x + self.vx * dt, self.y + self.vy * dt)
-    }
-}
-
-/// The earliest pending event of every disk, as a tournament tree: `nodes[1]` holds the
-/// earliest of all, `nodes[k]` the earlier of `nodes[2k]` and `nodes[2k + 1]`, and the
-/// leaves `nodes[size + i]` the events of disk i. Ties go to the lower disk index, so
-/// the processing order is deterministic.
-#[derive(Clone, Debug)]
-struct EventTree {
-    size: usize,
-    nodes: Vec<(f64, u32)>,
-}
-
-impl EventTree {
-    fn new(n_particles: usize) -> EventTree {
-        let size = n_particles.next_power_of_two().max(1);
-        EventTree {
-            size,
-            nodes: vec![(f64::INFINITY, NONE); 2 * size],
-        }
-    }
-
-    #[inline(always)]
-    fn earliest(&self) -> (f64, u32) {
-        self.nodes[1]
-    }
-
-    #[inline]
-    fn set(&mut self, disk: u32, time: f64) {
-        let mut k = self.size + disk as usize;
-        let mut value = (time, disk);
-        self.nodes[k] = value;
-        while k > 1 {
-            // The sibling shares the cache line; ties go to the left child.
-            let sibling = self.nodes[k ^ 1];
-            let sibling_wins = if k & 1 == 1 {
-                sibling.0 <= value.0
-            } else {
-                sibling.0 < value.0
-            };
-            if sibling_wins {
-                value = sibling;
-            }
-            k /= 2;
-            if self.nodes[k] == value {
-                // Unchanged here, so unchanged above.
-                break;
-            }
-            self.nodes[k] = value;
-        }
     }
 }
 
@@ -169,19 +151,12 @@ pub struct EventSim {
     time: f64,
     cells: CellList,
     flights: Vec<Flight>,
+    agendas: Vec<Agenda>,
     /// Per disk: its storage index in the caller's [`Particles`].
     origin: Vec<u32>,
     /// Events processed since the disks were last re-stored in cell order.
     events_since_reorder: u64,
-    /// Per disk: column and row of its cell.
-    home: Vec<[u32; 2]>,
-    /// Per disk: how many times its velocity changed (invalidates partners' predictions).
-    count: Vec<u32>,
-    /// Per disk: its pending event (the tree's leaf).
-    next: Vec<Scheduled>,
-    /// Per disk: the earliest pair event found since its velocity last changed.
-    best_pair: Vec<Scheduled>,
-    tree: EventTree,
+    queue: EventCalendar,
     counters: StepCounters,
     cell_crossings: u64,
     collapse_guard_fired: u64,
@@ -208,12 +183,10 @@ impl EventSim {
             Boundary::Walls => min_side,
         };
         let mut cells = CellList::new(&domain, min_side, n);
-        let mut home = Vec::with_capacity(n);
         let flights: Vec<Flight> = (0..n)
             .map(|idx| {
                 let (col, row) = cells.cell_of(particles.x[idx], particles.y[idx]);
                 cells.insert(idx as u32, cells.index(col, row));
-                home.push([col as u32, row as u32]);
                 Flight {
                     x: particles.x[idx],
                     y: particles.y[idx],
@@ -221,9 +194,17 @@ impl EventSim {
                     vy: particles.vy[idx],
                     t: 0.0,
                     radius: particles.radius[idx],
-                    mass: particles.mass[idx],
-                    last_collision: f64::NEG_INFINITY,
+                    count: 0,
+                    home: [col as u32, row as u32],
                 }
+            })
+            .collect();
+        let agendas = (0..n)
+            .map(|idx| Agenda {
+                mass: particles.mass[idx],
+                last_collision: f64::NEG_INFINITY,
+                next: NOTHING,
+                best_pair: NOTHING,
             })
             .collect();
         let mut sim = EventSim {
@@ -233,13 +214,10 @@ impl EventSim {
             time: 0.0,
             cells,
             flights,
+            agendas,
             origin: (0..n as u32).collect(),
             events_since_reorder: 0,
-            home,
-            count: vec![0; n],
-            next: vec![NOTHING; n],
-            best_pair: vec![NOTHING; n],
-            tree: EventTree::new(n),
+            queue: EventCalendar::new(n),
             counters: StepCounters::default(),
             cell_crossings: 0,
             collapse_guard_fired: 0,
@@ -252,6 +230,7 @@ impl EventSim {
         for disk in 0..n as u32 {
             sim.predict(disk);
         }
+        sim.refile_queue();
         sim
     }
 
@@ -283,21 +262,26 @@ impl EventSim {
         };
         permute(&mut self.flights, &order, |f| f);
         permute(&mut self.origin, &order, |o| o);
-        permute(&mut self.home, &order, |h| h);
-        permute(&mut self.count, &order, |c| c);
-        permute(&mut self.next, &order, remap);
-        permute(&mut self.best_pair, &order, remap);
+        permute(&mut self.agendas, &order, |agenda| Agenda {
+            next: remap(agenda.next),
+            best_pair: remap(agenda.best_pair),
+            ..agenda
+        });
         self.cells.clear();
         // Inserting backwards leaves each cell's list in ascending slot order.
         for disk in (0..n).rev() {
-            let [col, row] = self.home[disk];
+            let [col, row] = self.flights[disk].home;
             let cell = self.cells.index(col as usize, row as usize);
             self.cells.insert(disk as u32, cell);
         }
-        for disk in 0..n {
-            self.tree.set(disk as u32, self.next[disk].time);
-        }
+        self.refile_queue();
         self.events_since_reorder = 0;
+    }
+
+    /// Files every disk's pending event afresh, in blocks sized for the current rate.
+    fn refile_queue(&mut self) {
+        let times = self.agendas.iter().map(|agenda| agenda.next.time);
+        self.queue.refile(self.time, times);
     }
 
     /// Time reached so far.
@@ -354,7 +338,7 @@ impl EventSim {
         // detector's window.
         let mut limit = stop.min(self.collapse.window_end());
         loop {
-            let (time, disk) = self.tree.earliest();
+            let (time, disk) = self.queue.earliest();
             let collisions = self.counters.pair_collisions + self.counters.wall_collisions;
             if collisions >= limit {
                 if collisions >= stop || self.collapse.judge(collisions, self.time) {
@@ -373,11 +357,11 @@ impl EventSim {
                 self.reorder();
                 continue;
             }
-            let event = self.next[disk as usize];
+            let event = self.agendas[disk as usize].next;
             match event.kind {
                 Kind::Nothing => return,
                 Kind::Pair { partner, count } => {
-                    if self.count[partner as usize] == count {
+                    if self.flights[partner as usize].count == count {
                         self.collide(disk, partner);
                     } else {
                         // The partner changed course since: predict this disk afresh.
@@ -421,25 +405,32 @@ impl EventSim {
         let distance = dx.hypot(dy);
         let contact = fa.radius + fb.radius;
         let now = self.time;
+        let (ga, gb) = (self.agendas[a as usize], self.agendas[b as usize]);
         let guarded =
-            now - fa.last_collision < self.params.tc || now - fb.last_collision < self.params.tc;
+            now - ga.last_collision < self.params.tc || now - gb.last_collision < self.params.tc;
         let e = if guarded {
             self.collapse_guard_fired += u64::from(self.physics.restitution < 1.0);
             1.0
         } else {
             self.physics.restitution
         };
-        let side = |f: &Flight| PairSide {
-            mass: f.mass,
+        let side = |f: &Flight, g: &Agenda| PairSide {
+            mass: g.mass,
             vx: f.vx,
             vy: f.vy,
         };
-        let ([[vax, vay], [vbx, vby]], impulse) =
-            exchange_along(e, dx / distance, dy / distance, side(&fa), side(&fb));
+        let ([[vax, vay], [vbx, vby]], impulse) = exchange_along(
+            e,
+            dx / distance,
+            dy / distance,
+            side(&fa, &ga),
+            side(&fb, &gb),
+        );
         for (disk, vx, vy) in [(a, vax, vay), (b, vbx, vby)] {
             let flight = &mut self.flights[disk as usize];
-            (flight.vx, flight.vy, flight.last_collision) = (vx, vy, now);
-            self.count[disk as usize] = self.count[disk as usize].wrapping_add(1);
+            (flight.vx, flight.vy) = (vx, vy);
+            flight.count = flight.count.wrapping_add(1);
+            self.agendas[disk as usize].last_collision = now;
         }
         let overlap = ((contact - distance) / contact).max(0.0);
         let counters = &mut self.counters;
@@ -461,7 +452,7 @@ impl EventSim {
         } else {
             flight.vy *= -e;
         }
-        self.count[disk as usize] = self.count[disk as usize].wrapping_add(1);
+        flight.count = flight.count.wrapping_add(1);
         self.counters.wall_collisions += 1;
         self.predict(disk);
     }
@@ -473,7 +464,7 @@ impl EventSim {
         self.bring_to_now(disk);
         self.cell_crossings += 1;
         let i = disk as usize;
-        let [col, row] = self.home[i];
+        let [col, row] = self.flights[i].home;
         let (old_col, old_row) = (col as usize, row as usize);
         let step: i64 = if forward { 1 } else { -1 };
         let (d_col, d_row) = if axis == 0 { (step, 0) } else { (0, step) };
@@ -491,17 +482,23 @@ impl EventSim {
             target.cell % self.cells.n_cols,
             target.cell / self.cells.n_cols,
         );
-        self.home[i] = [new_col as u32, new_row as u32];
-        let best = self.best_pair[i];
+        self.flights[i].home = [new_col as u32, new_row as u32];
+        let best = self.agendas[i].best_pair;
         let still_valid = match best.kind {
-            Kind::Pair { partner, count } => self.count[partner as usize] == count,
+            Kind::Pair { partner, count } => self.flights[partner as usize].count == count,
             _ => true,
         };
         if !still_valid {
             self.predict(disk);
             return;
         }
-        let mut best = best;
+        let mut nearest = match best.kind {
+            Kind::Pair { partner, .. } => Nearest {
+                time: best.time,
+                partner,
+            },
+            _ => NO_PARTNER,
+        };
         for offset in -1..=1 {
             let (c, r) = if axis == 0 {
                 (step, offset)
@@ -509,79 +506,96 @@ impl EventSim {
                 (offset, step)
             };
             if let Some(neighbour) = self.cells.offset(new_col, new_row, c, r) {
-                best = best.earlier(self.earliest_pair_in(disk, neighbour));
+                nearest = self.nearest_in(disk, neighbour, nearest);
             }
         }
-        self.schedule(disk, best);
+        self.schedule(disk, nearest);
     }
 
     /// Predicts a disk's next event from scratch (it must be at the current time or be
     /// brought there here).
     fn predict(&mut self, disk: u32) {
         self.bring_to_now(disk);
-        let [col, row] = self.home[disk as usize];
+        let [col, row] = self.flights[disk as usize].home;
         let (col, row) = (col as usize, row as usize);
         let (n_cols, n_rows) = (self.cells.n_cols, self.cells.n_rows);
-        let mut best = NOTHING;
+        let mut nearest = NO_PARTNER;
         if col >= 1 && col + 1 < n_cols && row >= 1 && row + 1 < n_rows {
             // Away from the edges: no wrapping, no shifts.
-            for r in row - 1..=row + 1 {
-                for c in col - 1..=col + 1 {
-                    let neighbour = Neighbour {
-                        cell: r * n_cols + c,
-                        shift_x: 0.0,
-                        shift_y: 0.0,
-                    };
-                    best = best.earlier(self.earliest_pair_in(disk, neighbour));
-                }
+            let centre = row * n_cols + col;
+            for cell in [
+                centre - n_cols - 1,
+                centre - n_cols,
+                centre - n_cols + 1,
+                centre - 1,
+                centre,
+                centre + 1,
+                centre + n_cols - 1,
+                centre + n_cols,
+                centre + n_cols + 1,
+            ] {
+                let neighbour = Neighbour {
+                    cell,
+                    shift_x: 0.0,
+                    shift_y: 0.0,
+                };
+                nearest = self.nearest_in(disk, neighbour, nearest);
             }
         } else {
             for neighbour in self.cells.neighbourhood(col, row) {
-                best = best.earlier(self.earliest_pair_in(disk, neighbour));
+                nearest = self.nearest_in(disk, neighbour, nearest);
             }
         }
-        self.schedule(disk, best);
+        self.schedule(disk, nearest);
     }
 
-    /// Records `best_pair` as the disk's best pair event and schedules the earliest of it,
-    /// its next cell crossing and its next wall bounce.
-    fn schedule(&mut self, disk: u32, best_pair: Scheduled) {
+    /// Records the nearest collision as the disk's best pair event and schedules the
+    /// earliest of it, its next cell crossing and its next wall bounce.
+    fn schedule(&mut self, disk: u32, nearest: Nearest) {
         let i = disk as usize;
-        self.best_pair[i] = best_pair;
+        let best_pair = if nearest.partner == NONE {
+            NOTHING
+        } else {
+            Scheduled {
+                time: nearest.time,
+                kind: Kind::Pair {
+                    partner: nearest.partner,
+                    count: self.flights[nearest.partner as usize].count,
+                },
+            }
+        };
+        self.agendas[i].best_pair = best_pair;
         let next = best_pair
             .earlier(self.crossing(disk, 0))
             .earlier(self.crossing(disk, 1));
-        self.next[i] = next;
-        self.tree.set(disk, next.time);
+        self.agendas[i].next = next;
+        self.queue.set(disk, next.time);
     }
 
-    /// The earliest collision of `disk` (at the current time) with a disk of `neighbour`.
+    /// The earlier of `nearest` and the earliest collision of `disk` (at the current
+    /// time) with a disk of `neighbour`; ties keep the earlier find. Written without
+    /// branches on the outcome of each test, which no predictor can guess.
     #[inline(always)]
-    fn earliest_pair_in(&self, disk: u32, neighbour: Neighbour) -> Scheduled {
+    fn nearest_in(&self, disk: u32, neighbour: Neighbour, nearest: Nearest) -> Nearest {
         let now = self.time;
         let a = &self.flights[disk as usize];
-        let mut best = NOTHING;
+        let mut nearest = nearest;
         let mut other = self.cells.first_in_cell(neighbour.cell);
         while other != NONE {
-            if other != disk {
-                let b = &self.flights[other as usize];
-                let (bx, by) = b.position_at(now);
-                let dx = bx + neighbour.shift_x - a.x;
-                let dy = by + neighbour.shift_y - a.y;
-                let wait = contact_wait(dx, dy, b.vx - a.vx, b.vy - a.vy, a.radius + b.radius);
-                if now + wait < best.time {
-                    best = Scheduled {
-                        time: now + wait,
-                        kind: Kind::Pair {
-                            partner: other,
-                            count: self.count[other as usize],
-                        },
-                    };
-                }
-            }
+            let b = &self.flights[other as usize];
+            let (bx, by) = b.position_at(now);
+            let dx = bx + neighbour.shift_x - a.x;
+            let dy = by + neighbour.shift_y - a.y;
+            let wait = contact_wait(dx, dy, b.vx - a.vx, b.vy - a.vy, a.radius + b.radius);
+            let time = now + wait;
+            let earlier = (time < nearest.time) & (other != disk);
+            nearest.time = select(earlier, time, nearest.time);
+            // A mask rather than `if`, which compiles to a branch here.
+            let take = 0u32.wrapping_sub(u32::from(earlier));
+            nearest.partner = (other & take) | (nearest.partner & !take);
             other = self.cells.next_in_cell(other);
         }
-        best
+        nearest
     }
 
     /// The disk's next cell crossing or wall bounce along `axis`.
@@ -591,17 +605,10 @@ impl EventSim {
         let f = &self.flights[i];
         let (position, velocity, cell, cell_side, n_cells, length) = if axis == 0 {
             let (w, n) = (self.cells.cell_width, self.cells.n_cols);
-            (f.x, f.vx, self.home[i][0] as usize, w, n, self.domain.width)
+            (f.x, f.vx, f.home[0] as usize, w, n, self.domain.width)
         } else {
             let (h, n) = (self.cells.cell_height, self.cells.n_rows);
-            (
-                f.y,
-                f.vy,
-                self.home[i][1] as usize,
-                h,
-                n,
-                self.domain.height,
-            )
+            (f.y, f.vy, f.home[1] as usize, h, n, self.domain.height)
         };
         if velocity == 0.0 {
             return NOTHING;
@@ -648,29 +655,35 @@ const TOUCHING: f64 = 1e-10;
 #[inline(always)]
 pub fn contact_wait(dx: f64, dy: f64, dvx: f64, dvy: f64, contact: f64) -> f64 {
     let b = dx * dvx + dy * dvy;
-    if b >= 0.0 {
-        return f64::INFINITY;
-    }
     let v2 = dvx * dvx + dvy * dvy;
     let distance_sq = dx * dx + dy * dy;
-    let c = distance_sq - contact * contact;
-    if c < TOUCHING * contact * contact {
-        // Touching to rounding: a collision now if the pair really approaches; none if
-        // its normal approach is rounding-sized (below 1e-9 of the relative speed), as
-        // for a pair that e = 0 left at zero normal speed, which must not collide with
-        // zero impulse again and again.
-        return if b * b > 1e-18 * v2 * distance_sq {
-            0.0
-        } else {
-            f64::INFINITY
-        };
-    }
+    let contact_sq = contact * contact;
+    let c = distance_sq - contact_sq;
+    // Every outcome is computed and one selected, without a branch: which one applies
+    // is what no predictor can guess (and a disk tested against itself is "touching").
+    // Touching to rounding: a collision now if the pair really approaches; none if its
+    // normal approach is rounding-sized (below 1e-9 of the relative speed), as for a
+    // pair that e = 0 left at zero normal speed, which must not collide with zero
+    // impulse again and again.
+    let touching = c < TOUCHING * contact_sq;
+    let touch_now = (b < 0.0) & (b * b > 1e-18 * v2 * distance_sq);
+    // Otherwise, approaching with paths that come within contact: the smaller root
+    // c / (−b + √disc), written to avoid cancellation (NaN when there is none).
     let discriminant = b * b - v2 * c;
-    if discriminant < 0.0 {
-        return f64::INFINITY;
-    }
-    // The smaller root c / (−b + √disc), written to avoid cancellation.
-    (c / (-b + discriminant.sqrt())).max(0.0)
+    let root = (c / (-b + discriminant.sqrt())).max(0.0);
+    let meets = (b < 0.0) & (discriminant >= 0.0);
+    let wait = select(meets, root, f64::INFINITY);
+    let touch_wait = select(touch_now, 0.0, f64::INFINITY);
+    select(touching, touch_wait, wait)
+}
+
+/// `if condition { if_true } else { if_false }` with bit masks: the compiler turns an
+/// `if` between two computed values into a branch when one looks expensive, and in the
+/// pair test no predictor can guess it.
+#[inline(always)]
+fn select(condition: bool, if_true: f64, if_false: f64) -> f64 {
+    let mask = 0u64.wrapping_sub(u64::from(condition));
+    f64::from_bits((if_true.to_bits() & mask) | (if_false.to_bits() & !mask))
 }
 
 #[cfg(test)]

@@ -2,6 +2,7 @@
 //!
 //! No I/O, no printing, no threads: backends wrap it, and a step cannot fail.
 
+pub mod calendar;
 pub mod cells;
 pub mod collapse;
 pub mod collision;
