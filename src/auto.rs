@@ -221,7 +221,24 @@ pub fn choose(
     let step_cost = n * spec.steps as f64 / rates.step_particle_steps_per_s;
     // Both methods run the same simulated time, steps × dt.
     let sim_time = spec.steps as f64 * step.dt;
-    let events = event_pilot(pilot_scene, event, pilot_time) as f64;
+    let event_run = event_pilot(pilot_scene, event, pilot_time);
+    if let Some(collapse_time) = event_run.collapse_time {
+        let caveat = if step_passes {
+            ""
+        } else {
+            ", though it misses more than the tolerance"
+        };
+        return Ok(Choice {
+            reason: Some(format!(
+                "method auto: step{caveat}: the event method collapsed in its pilot at \
+                 t = {collapse_time:.4e} (tc = {:e}; a larger tc guards against it); \
+                 {dt_note}{pilot_note}",
+                event.tc
+            )),
+            ..step
+        });
+    }
+    let events = event_run.collisions as f64;
     let events_per_disk_time = events / (pilot_scene.particles.len() as f64 * pilot_time);
     let event_cost = events_per_disk_time * n * sim_time / rates.event_collisions_per_s;
     let costs = format!(

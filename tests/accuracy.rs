@@ -193,7 +193,7 @@ fn inelastic_gas_cools_by_haffs_law_early_on() {
 /// Three unit disks on one line in a 100 × 100 walled box, the outer two closing in on
 /// the middle one (off centre, so no two collisions coincide), at restitution `e`: 100
 /// intervals of 0.5 of the event method.
-fn three_in_a_row_text(e: f64) -> String {
+pub fn three_in_a_row_text(e: f64) -> String {
     format!(
         "[scene]\nsize = [100.0, 100.0]\nrestitution = {e}\n\
          [[scene.particle]]\nx = 40.0\ny = 50.0\nvx = 1.0\n\

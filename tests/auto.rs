@@ -11,7 +11,7 @@ use collide::scene_file::{self, Overrides};
 use collide::spec::{Method, MethodChoice, Observe};
 use collide::summary::RunSummary;
 
-use crate::accuracy::rayon_refuses;
+use crate::accuracy::{rayon_refuses, three_in_a_row_text};
 
 /// A periodic gas of 2000 unit disks (r = m = v_rms = 1) at `packing`, with `method` lines.
 fn gas(packing: f64, extra: &str) -> String {
@@ -75,6 +75,29 @@ fn method_auto_with_gravity_picks_the_step_method() {
     let summary = run(text, &Overrides::default());
     assert_eq!(summary.method, "step");
     assert!(summary.choice.unwrap().contains("gravity"));
+}
+
+#[test]
+fn method_auto_picks_the_step_method_when_the_event_pilot_collapses() {
+    // Three disks in a row at e = 0.05 collapse without the TC guard (tests/accuracy.rs)
+    // at t ≈ 8.4, inside the pilot's span (64 r/v_max = 64).
+    let text = three_in_a_row_text(0.05).replace("method = \"event\"", "method = \"auto\"");
+    let unguarded = Overrides {
+        tc: Some(0.0),
+        ..Overrides::default()
+    };
+    let summary = run(&text, &unguarded);
+    let choice = summary.choice.clone().expect("auto says what it chose");
+    assert_eq!(summary.method, "step", "{choice}");
+    assert!(
+        choice.contains("the event method collapsed in its pilot at t = 8."),
+        "{choice}"
+    );
+    // With the guard on the event method does not collapse, and its pilot is costed.
+    let summary = run(&text, &Overrides::default());
+    let choice = summary.choice.expect("auto says what it chose");
+    assert!(!choice.contains("collapsed"), "{choice}");
+    assert!(choice.contains("cost model"), "{choice}");
 }
 
 #[test]

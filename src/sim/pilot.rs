@@ -52,13 +52,23 @@ pub fn step_pilot(scene: &Scene, dt: f64, steps: u64, broadphase: Broadphase) ->
     }
 }
 
-/// Pair and wall collisions (the events the event method's cost is counted in) of the
-/// exact event-driven run from the scene's initial state to time `t_end`. The scene must
-/// have no gravity (the event method refuses it).
-pub fn event_pilot(scene: &Scene, event: EventParams, t_end: f64) -> u64 {
+/// What an exact event-driven pilot saw: its pair and wall collisions (the events the
+/// event method's cost is counted in), and when it collapsed, if it did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EventPilot {
+    pub collisions: u64,
+    pub collapse_time: Option<f64>,
+}
+
+/// The exact event-driven run from the scene's initial state to time `t_end` (or to its
+/// collapse). The scene must have no gravity (the event method refuses it).
+pub fn event_pilot(scene: &Scene, event: EventParams, t_end: f64) -> EventPilot {
     let mut particles = scene.particles.clone();
     let mut sim = EventSim::new(scene.domain, scene.physics, event, &particles);
     sim.advance_to(&mut particles, t_end);
     let counters = sim.counters();
-    counters.pair_collisions + counters.wall_collisions
+    EventPilot {
+        collisions: counters.pair_collisions + counters.wall_collisions,
+        collapse_time: sim.collapse_time(),
+    }
 }
