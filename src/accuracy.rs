@@ -225,6 +225,18 @@ mod tests {
     }
 
     #[test]
+    fn event_labels_give_the_tc_time_to_three_significant_digits() {
+        assert_eq!(method_label("event", 0.0), "event, tc = 0");
+        assert_eq!(
+            method_label("event", 0.00009999999999999988),
+            "event, tc = 0.0001"
+        );
+        assert_eq!(method_label("event", 0.0123456), "event, tc = 0.0123");
+        assert_eq!(method_label("event", f64::NAN), "event");
+        assert_eq!(method_label("step", 0.1), "step");
+    }
+
+    #[test]
     fn the_pareto_front_keeps_the_points_nothing_beats() {
         // (speed, error): (3, 0.5) beats (2, 0.6); (1, 0.01) and (3, 0.5) trade off;
         // the NaN point is left out; equal points are both kept.
@@ -307,10 +319,20 @@ pub struct CoolingCurve {
 /// time where recorded ("event, tc = 0"), the step method by name.
 pub fn method_label(method: &str, tc: f64) -> String {
     if method == "event" && tc.is_finite() {
-        format!("event, tc = {tc}")
+        format!("event, tc = {}", three_significant(tc))
     } else {
         method.to_owned()
     }
+}
+
+/// A number rounded to three significant digits, written shortest ("0", "0.0001",
+/// "0.25"): the default TC time is a fraction of r/v_rms, whose rounding
+/// ("0.00009999999999999988") says nothing.
+fn three_significant(value: f64) -> String {
+    let rounded: f64 = format!("{value:.2e}")
+        .parse()
+        .expect("a formatted float parses");
+    format!("{rounded}")
 }
 
 /// How and when a run broke down.

@@ -49,16 +49,16 @@ pub struct Measured {
 /// even where the machine differs: by N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [
-        measured(1e4, 0.05, 54.6e6, 1.03e6),
-        measured(1e4, 0.3, 39.2e6, 1.70e6),
+        measured(1e4, 0.05, 50.3e6, 1.01e6),
+        measured(1e4, 0.3, 40.6e6, 1.88e6),
     ],
     [
-        measured(1e5, 0.05, 40.3e6, 0.327e6),
-        measured(1e5, 0.3, 26.3e6, 0.727e6),
+        measured(1e5, 0.05, 32.8e6, 0.367e6),
+        measured(1e5, 0.3, 32.7e6, 0.721e6),
     ],
     [
-        measured(1e6, 0.05, 25.3e6, 0.256e6),
-        measured(1e6, 0.3, 20.8e6, 0.492e6),
+        measured(1e6, 0.05, 24.9e6, 0.250e6),
+        measured(1e6, 0.3, 25.9e6, 0.475e6),
     ],
 ];
 
