@@ -217,10 +217,11 @@ fn backend_steps(c: &mut Criterion) {
 
 /// The cost model of `method = "auto"` (`collide::auto::MEASURED`): both methods on the
 /// same periodic gases of unit disks at N = 10⁴, 10⁵ and 10⁶, packing 0.05 and 0.3, in
-/// one run. `step/…` is one serial step (elem/s: particle-steps per second); `event/…`
+/// one run. `step/…` is one serial step (elem/s: particle-steps per second); `event/n…`
 /// processes a fixed number of collisions (pair and wall) after a warm-up of one
 /// collision per disk (elem/s: collisions per second on one core; cell crossings are
-/// work, not counted).
+/// work, not counted); `event/observe_n…` writes the state out, as every dt of a run
+/// does (elem/s: disks per second).
 fn cost_model(c: &mut Criterion) {
     const COLLISIONS: u64 = 100_000;
     const SIZES: [usize; 3] = [10_000, 100_000, 1_000_000];
@@ -246,7 +247,6 @@ fn cost_model(c: &mut Criterion) {
     }
     group.finish();
     let mut group = c.benchmark_group("event");
-    group.throughput(Throughput::Elements(COLLISIONS));
     group.sample_size(10);
     for n in SIZES {
         for packing in [0.05, 0.3] {
@@ -254,8 +254,16 @@ fn cost_model(c: &mut Criterion) {
             let params = EventParams { tc: 0.0 };
             let mut sim = EventSim::new(scene.domain, scene.physics, params, &scene.particles);
             sim.advance_collisions(n as u64);
+            group.throughput(Throughput::Elements(COLLISIONS));
             group.bench_function(BenchmarkId::new(format!("n{n}"), packing), |b| {
                 b.iter(|| sim.advance_collisions(COLLISIONS));
+            });
+            // Observing the state (every dt of a run): all disks brought to the current
+            // time and written out, no event processed; elem/s is disks per second.
+            let mut particles = scene.particles.clone();
+            group.throughput(Throughput::Elements(n as u64));
+            group.bench_function(BenchmarkId::new(format!("observe_n{n}"), packing), |b| {
+                b.iter(|| sim.advance_to(&mut particles, sim.time()));
             });
         }
     }

@@ -41,6 +41,9 @@ pub struct Measured {
     pub step_particle_steps_per_s: f64,
     /// Event method: pair and wall collisions per second (`event/n…/…`).
     pub event_collisions_per_s: f64,
+    /// Event method: disks brought to the current time and written out per second, as
+    /// at every dt of a run (`event/observe_n…/…`).
+    pub event_observed_disks_per_s: f64,
 }
 
 /// The cost model, measured in one run of
@@ -49,25 +52,26 @@ pub struct Measured {
 /// even where the machine differs: by N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [
-        measured(1e4, 0.05, 50.3e6, 1.01e6),
-        measured(1e4, 0.3, 40.6e6, 1.88e6),
+        measured(1e4, 0.05, 53.8e6, 1.06e6, 560e6),
+        measured(1e4, 0.3, 34.8e6, 1.90e6, 587e6),
     ],
     [
-        measured(1e5, 0.05, 32.8e6, 0.367e6),
-        measured(1e5, 0.3, 32.7e6, 0.721e6),
+        measured(1e5, 0.05, 35.4e6, 0.378e6, 516e6),
+        measured(1e5, 0.3, 34.4e6, 0.621e6, 546e6),
     ],
     [
-        measured(1e6, 0.05, 24.9e6, 0.250e6),
-        measured(1e6, 0.3, 25.9e6, 0.475e6),
+        measured(1e6, 0.05, 25.2e6, 0.252e6, 98.6e6),
+        measured(1e6, 0.3, 27.4e6, 0.472e6, 127e6),
     ],
 ];
 
-const fn measured(n: f64, packing: f64, step: f64, event: f64) -> Measured {
+const fn measured(n: f64, packing: f64, step: f64, event: f64, observe: f64) -> Measured {
     Measured {
         n,
         packing,
         step_particle_steps_per_s: step,
         event_collisions_per_s: event,
+        event_observed_disks_per_s: observe,
     }
 }
 
@@ -93,6 +97,7 @@ pub fn cost_rates(n: f64, packing: f64) -> Measured {
         packing,
         step_particle_steps_per_s: mix(|m| m.step_particle_steps_per_s),
         event_collisions_per_s: mix(|m| m.event_collisions_per_s),
+        event_observed_disks_per_s: mix(|m| m.event_observed_disks_per_s),
     }
 }
 
@@ -240,14 +245,17 @@ pub fn choose(
     }
     let events = event_run.collisions as f64;
     let events_per_disk_time = events / (pilot_scene.particles.len() as f64 * pilot_time);
-    let event_cost = events_per_disk_time * n * sim_time / rates.event_collisions_per_s;
+    // The collisions of the whole run, and the state observed at each of its steps.
+    let event_cost = events_per_disk_time * n * sim_time / rates.event_collisions_per_s
+        + n * spec.steps as f64 / rates.event_observed_disks_per_s;
     let costs = format!(
         "cost model at N = {n}, packing {:.3} (step {:.1} M particle-steps/s, event {:.2} M \
-         collisions/s): step {step_cost:.3e} s, event {event_cost:.3e} s ({events} collisions \
-         in the event pilot to t = {pilot_time:.4e})",
+         collisions/s and {:.0} M observed disks/s): step {step_cost:.3e} s, event \
+         {event_cost:.3e} s ({events} collisions in the event pilot to t = {pilot_time:.4e})",
         scene.packing(),
         rates.step_particle_steps_per_s / 1e6,
         rates.event_collisions_per_s / 1e6,
+        rates.event_observed_disks_per_s / 1e6,
     );
     let choice = if step_passes && step_cost <= event_cost {
         Choice {
