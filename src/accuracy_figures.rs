@@ -1,5 +1,6 @@
 //! The accuracy study's figures (PNG, plotters, the fonts and palette of `figures`):
-//! speed against error with the Pareto front, and the stability map of v_rms·dt/r ×
+//! speed against error (missed fraction, pressure and collision-rate errors) with the
+//! Pareto front, and the stability map of v_rms·dt/r ×
 //! packing coloured by missed-collision fraction with the failure boundary; and for
 //! e < 1 the cooling curves against Haff's law.
 
@@ -18,7 +19,7 @@ use crate::figures::{FONT, PALETTE, draw_legend, register_font};
 /// File names of the two figures.
 pub const PARETO_FILE: &str = "accuracy-pareto.png";
 pub const STABILITY_FILE: &str = "accuracy-stability.png";
-const PARETO_SIZE: (u32, u32) = (1400, 600);
+const PARETO_SIZE: (u32, u32) = (2000, 600);
 const STABILITY_SIZE: (u32, u32) = (1100, 560);
 /// Which error a panel plots.
 type ErrorOf = fn(&AccuracyPoint) -> f64;
@@ -60,10 +61,13 @@ fn draw_pareto(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
         "Speed against accuracy: step method (points, large dt on the left) and event reference (dashed)",
         22,
     )?;
-    let panels = root.split_evenly((1, 2));
-    let errors: [(&str, ErrorOf); 2] = [
+    let panels = root.split_evenly((1, 3));
+    let errors: [(&str, ErrorOf); 3] = [
         ("missed-collision fraction", |p| p.missed_fraction),
         ("|Z error| against the event reference", |p| p.z_error),
+        ("|collision-rate error| against the event reference", |p| {
+            p.rate_error
+        }),
     ];
     let speeds: Vec<f64> = groups
         .iter()
