@@ -403,7 +403,7 @@ fn the_accuracy_report_tabulates_errors_and_draws_the_pareto_and_stability_figur
     let count =
         |image: &image::RgbImage, rgb: [u8; 3]| image.pixels().filter(|p| p.0 == rgb).count();
     let pareto = image::open(&pareto).unwrap().to_rgb8();
-    assert_eq!(pareto.dimensions(), (1400, 600));
+    assert_eq!(pareto.dimensions(), (2000, 600));
     // Both packings' curves (the palette's blue and red) are drawn.
     let blue = count(&pareto, [0x1f, 0x77, 0xb4]);
     let red = count(&pareto, [0xd6, 0x27, 0x28]);

@@ -1,6 +1,7 @@
-//! Uniform cells over the box with doubly linked member lists, and each cell's
-//! neighbourhood with the periodic image shift of every neighbour: the broad phase of
-//! the event-driven method (`sim::event`) and of the swept missed-collision test
+//! Uniform cells over the box and each cell's neighbourhood with the periodic image
+//! shift of every neighbour ([`CellGrid`]), and singly linked member lists over them
+//! ([`CellList`]): the broad phase of the event-driven method (`sim::event`, which keeps
+//! its members' links in its own per-disk state) and of the swept missed-collision test
 //! (`sim::observe`). The time-stepped method has its own strips (`sim::grid`).
 
 use super::scene::{Boundary, Domain};
@@ -18,9 +19,9 @@ pub struct Neighbour {
 }
 
 /// `n_cols × n_rows` cells covering `[0, width] × [0, height]`, each at least as wide
-/// as asked, with the disks (by index) in each.
+/// as asked.
 #[derive(Clone, Debug)]
-pub struct CellList {
+pub struct CellGrid {
     pub n_cols: usize,
     pub n_rows: usize,
     pub cell_width: f64,
@@ -28,20 +29,17 @@ pub struct CellList {
     width: f64,
     height: f64,
     periodic: bool,
-    head: Vec<u32>,
-    next: Vec<u32>,
-    prev: Vec<u32>,
 }
 
-impl CellList {
-    /// Empty cells at least `min_side` across for `n_particles` disks. A sparse box gets
+impl CellGrid {
+    /// Cells at least `min_side` across for `n_particles` disks. A sparse box gets
     /// wider cells, so that there are never more than about 4 cells per disk.
-    pub fn new(domain: &Domain, min_side: f64, n_particles: usize) -> CellList {
+    pub fn new(domain: &Domain, min_side: f64, n_particles: usize) -> CellGrid {
         let max_cells = 4.0 * n_particles as f64 + 16.0;
         let side = min_side.max((domain.area() / max_cells).sqrt());
         let n_cols = ((domain.width / side).floor() as usize).max(1);
         let n_rows = ((domain.height / side).floor() as usize).max(1);
-        CellList {
+        CellGrid {
             n_cols,
             n_rows,
             cell_width: domain.width / n_cols as f64,
@@ -49,9 +47,6 @@ impl CellList {
             width: domain.width,
             height: domain.height,
             periodic: domain.boundary == Boundary::Periodic,
-            head: vec![NONE; n_cols * n_rows],
-            next: vec![NONE; n_particles],
-            prev: vec![NONE; n_particles],
         }
     }
 
@@ -70,55 +65,13 @@ impl CellList {
         row * self.n_cols + col
     }
 
-    /// Empties every cell.
-    pub fn clear(&mut self) {
-        self.head.fill(NONE);
-    }
-
     /// Cells in all.
     pub fn len(&self) -> usize {
-        self.head.len()
+        self.n_cols * self.n_rows
     }
 
     pub fn is_empty(&self) -> bool {
-        self.head.is_empty()
-    }
-
-    /// Adds disk `disk` to cell `cell`.
-    #[inline]
-    pub fn insert(&mut self, disk: u32, cell: usize) {
-        let first = self.head[cell];
-        self.next[disk as usize] = first;
-        self.prev[disk as usize] = NONE;
-        if first != NONE {
-            self.prev[first as usize] = disk;
-        }
-        self.head[cell] = disk;
-    }
-
-    /// Takes disk `disk` out of cell `cell`, where it must be.
-    #[inline]
-    pub fn remove(&mut self, disk: u32, cell: usize) {
-        let (prev, next) = (self.prev[disk as usize], self.next[disk as usize]);
-        if prev == NONE {
-            self.head[cell] = next;
-        } else {
-            self.next[prev as usize] = next;
-        }
-        if next != NONE {
-            self.prev[next as usize] = prev;
-        }
-    }
-
-    /// The first disk of a cell ([`NONE`] when empty); follow with [`CellList::next_in_cell`].
-    #[inline(always)]
-    pub fn first_in_cell(&self, cell: usize) -> u32 {
-        self.head[cell]
-    }
-
-    #[inline(always)]
-    pub fn next_in_cell(&self, disk: u32) -> u32 {
-        self.next[disk as usize]
+        self.len() == 0
     }
 
     /// The cell at `(col + d_col, row + d_row)` with its image shift, `None` beyond a wall.
@@ -139,6 +92,44 @@ impl CellList {
         (-1..=1).flat_map(move |d_row| {
             (-1..=1).filter_map(move |d_col| self.offset(col, row, d_col, d_row))
         })
+    }
+}
+
+/// A [`CellGrid`] with the disks (by index) in each cell, as singly linked lists.
+#[derive(Clone, Debug)]
+pub struct CellList {
+    pub grid: CellGrid,
+    head: Vec<u32>,
+    next: Vec<u32>,
+}
+
+impl CellList {
+    /// Empty cells at least `min_side` across for `n_particles` disks (see [`CellGrid::new`]).
+    pub fn new(domain: &Domain, min_side: f64, n_particles: usize) -> CellList {
+        let grid = CellGrid::new(domain, min_side, n_particles);
+        CellList {
+            head: vec![NONE; grid.len()],
+            next: vec![NONE; n_particles],
+            grid,
+        }
+    }
+
+    /// Adds disk `disk` to cell `cell`.
+    #[inline]
+    pub fn insert(&mut self, disk: u32, cell: usize) {
+        self.next[disk as usize] = self.head[cell];
+        self.head[cell] = disk;
+    }
+
+    /// The first disk of a cell ([`NONE`] when empty); follow with [`CellList::next_in_cell`].
+    #[inline(always)]
+    pub fn first_in_cell(&self, cell: usize) -> u32 {
+        self.head[cell]
+    }
+
+    #[inline(always)]
+    pub fn next_in_cell(&self, disk: u32) -> u32 {
+        self.next[disk as usize]
     }
 }
 

@@ -33,7 +33,7 @@
 //! method. Disks must start without overlaps (scene construction guarantees it).
 
 use super::calendar::EventCalendar;
-use super::cells::{CellList, NONE, Neighbour};
+use super::cells::{CellGrid, NONE, Neighbour};
 use super::collapse::CollapseDetector;
 use super::collision::{PairSide, exchange_along};
 use super::particles::Particles;
@@ -116,6 +116,8 @@ struct Flight {
     count: u32,
     /// Column and row of its cell.
     home: [u32; 2],
+    /// The next disk of its cell's member list ([`NONE`] at the end).
+    next_in_cell: u32,
 }
 
 /// The rest of a disk's state, read only when it has an event: one more cache line.
@@ -149,7 +151,9 @@ pub struct EventSim {
     params: EventParams,
     /// The time of the last processed event (or of the last `advance_to`).
     time: f64,
-    cells: CellList,
+    grid: CellGrid,
+    /// Per cell: its first disk ([`NONE`]: empty); the rest follow `next_in_cell`.
+    heads: Vec<u32>,
     flights: Vec<Flight>,
     agendas: Vec<Agenda>,
     /// Per disk: its storage index in the caller's [`Particles`].
@@ -182,11 +186,10 @@ impl EventSim {
                 .max(2.0 * particles.max_radius()),
             Boundary::Walls => min_side,
         };
-        let mut cells = CellList::new(&domain, min_side, n);
+        let grid = CellGrid::new(&domain, min_side, n);
         let flights: Vec<Flight> = (0..n)
             .map(|idx| {
-                let (col, row) = cells.cell_of(particles.x[idx], particles.y[idx]);
-                cells.insert(idx as u32, cells.index(col, row));
+                let (col, row) = grid.cell_of(particles.x[idx], particles.y[idx]);
                 Flight {
                     x: particles.x[idx],
                     y: particles.y[idx],
@@ -196,6 +199,7 @@ impl EventSim {
                     radius: particles.radius[idx],
                     count: 0,
                     home: [col as u32, row as u32],
+                    next_in_cell: NONE,
                 }
             })
             .collect();
@@ -212,7 +216,8 @@ impl EventSim {
             physics,
             params,
             time: 0.0,
-            cells,
+            heads: vec![NONE; grid.len()],
+            grid,
             flights,
             agendas,
             origin: (0..n as u32).collect(),
@@ -226,6 +231,10 @@ impl EventSim {
                 physics.restitution < 1.0 || physics.wall_restitution < 1.0,
             ),
         };
+        for disk in 0..n {
+            let [col, row] = sim.flights[disk].home;
+            sim.insert(disk as u32, sim.grid.index(col as usize, row as usize));
+        }
         sim.reorder();
         for disk in 0..n as u32 {
             sim.predict(disk);
@@ -239,11 +248,11 @@ impl EventSim {
     fn reorder(&mut self) {
         let n = self.flights.len();
         let mut order = Vec::with_capacity(n); // new slot → old slot
-        for cell in 0..self.cells.len() {
-            let mut disk = self.cells.first_in_cell(cell);
+        for &first in &self.heads {
+            let mut disk = first;
             while disk != NONE {
                 order.push(disk);
-                disk = self.cells.next_in_cell(disk);
+                disk = self.flights[disk as usize].next_in_cell;
             }
         }
         let mut new_slot = vec![0u32; n];
@@ -267,12 +276,12 @@ impl EventSim {
             best_pair: remap(agenda.best_pair),
             ..agenda
         });
-        self.cells.clear();
+        self.heads.fill(NONE);
         // Inserting backwards leaves each cell's list in ascending slot order.
         for disk in (0..n).rev() {
             let [col, row] = self.flights[disk].home;
-            let cell = self.cells.index(col as usize, row as usize);
-            self.cells.insert(disk as u32, cell);
+            let cell = self.grid.index(col as usize, row as usize);
+            self.insert(disk as u32, cell);
         }
         self.refile_queue();
         self.events_since_reorder = 0;
@@ -282,6 +291,29 @@ impl EventSim {
     fn refile_queue(&mut self) {
         let times = self.agendas.iter().map(|agenda| agenda.next.time);
         self.queue.refile(self.time, times);
+    }
+
+    /// Adds `disk` at the head of `cell`'s member list.
+    #[inline]
+    fn insert(&mut self, disk: u32, cell: usize) {
+        self.flights[disk as usize].next_in_cell = self.heads[cell];
+        self.heads[cell] = disk;
+    }
+
+    /// Takes `disk` out of `cell`'s member list, where it must be (lists hold a disk or
+    /// two, so walking to its predecessor is cheaper than keeping back links).
+    #[inline]
+    fn remove(&mut self, disk: u32, cell: usize) {
+        let next = self.flights[disk as usize].next_in_cell;
+        if self.heads[cell] == disk {
+            self.heads[cell] = next;
+            return;
+        }
+        let mut before = self.heads[cell];
+        while self.flights[before as usize].next_in_cell != disk {
+            before = self.flights[before as usize].next_in_cell;
+        }
+        self.flights[before as usize].next_in_cell = next;
     }
 
     /// Time reached so far.
@@ -469,18 +501,18 @@ impl EventSim {
         let step: i64 = if forward { 1 } else { -1 };
         let (d_col, d_row) = if axis == 0 { (step, 0) } else { (0, step) };
         let target = self
-            .cells
+            .grid
             .offset(old_col, old_row, d_col, d_row)
             .expect("crossings are only scheduled towards existing cells");
         // Across a periodic edge the stored position moves to the new cell's image.
         let flight = &mut self.flights[i];
         flight.x -= target.shift_x;
         flight.y -= target.shift_y;
-        self.cells.remove(disk, self.cells.index(old_col, old_row));
-        self.cells.insert(disk, target.cell);
+        self.remove(disk, self.grid.index(old_col, old_row));
+        self.insert(disk, target.cell);
         let (new_col, new_row) = (
-            target.cell % self.cells.n_cols,
-            target.cell / self.cells.n_cols,
+            target.cell % self.grid.n_cols,
+            target.cell / self.grid.n_cols,
         );
         self.flights[i].home = [new_col as u32, new_row as u32];
         let best = self.agendas[i].best_pair;
@@ -505,7 +537,7 @@ impl EventSim {
             } else {
                 (offset, step)
             };
-            if let Some(neighbour) = self.cells.offset(new_col, new_row, c, r) {
+            if let Some(neighbour) = self.grid.offset(new_col, new_row, c, r) {
                 nearest = self.nearest_in(disk, neighbour, nearest);
             }
         }
@@ -518,7 +550,7 @@ impl EventSim {
         self.bring_to_now(disk);
         let [col, row] = self.flights[disk as usize].home;
         let (col, row) = (col as usize, row as usize);
-        let (n_cols, n_rows) = (self.cells.n_cols, self.cells.n_rows);
+        let (n_cols, n_rows) = (self.grid.n_cols, self.grid.n_rows);
         let mut nearest = NO_PARTNER;
         if col >= 1 && col + 1 < n_cols && row >= 1 && row + 1 < n_rows {
             // Away from the edges: no wrapping, no shifts.
@@ -542,7 +574,7 @@ impl EventSim {
                 nearest = self.nearest_in(disk, neighbour, nearest);
             }
         } else {
-            for neighbour in self.cells.neighbourhood(col, row) {
+            for neighbour in self.grid.neighbourhood(col, row) {
                 nearest = self.nearest_in(disk, neighbour, nearest);
             }
         }
@@ -580,7 +612,7 @@ impl EventSim {
         let now = self.time;
         let a = &self.flights[disk as usize];
         let mut nearest = nearest;
-        let mut other = self.cells.first_in_cell(neighbour.cell);
+        let mut other = self.heads[neighbour.cell];
         while other != NONE {
             let b = &self.flights[other as usize];
             let (bx, by) = b.position_at(now);
@@ -593,7 +625,7 @@ impl EventSim {
             // A mask rather than `if`, which compiles to a branch here.
             let take = 0u32.wrapping_sub(u32::from(earlier));
             nearest.partner = (other & take) | (nearest.partner & !take);
-            other = self.cells.next_in_cell(other);
+            other = b.next_in_cell;
         }
         nearest
     }
@@ -604,10 +636,10 @@ impl EventSim {
         let i = disk as usize;
         let f = &self.flights[i];
         let (position, velocity, cell, cell_side, n_cells, length) = if axis == 0 {
-            let (w, n) = (self.cells.cell_width, self.cells.n_cols);
+            let (w, n) = (self.grid.cell_width, self.grid.n_cols);
             (f.x, f.vx, f.home[0] as usize, w, n, self.domain.width)
         } else {
-            let (h, n) = (self.cells.cell_height, self.cells.n_rows);
+            let (h, n) = (self.grid.cell_height, self.grid.n_rows);
             (f.y, f.vy, f.home[1] as usize, h, n, self.domain.height)
         };
         if velocity == 0.0 {

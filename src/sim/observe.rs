@@ -85,12 +85,12 @@ impl MissedCollisions {
         let mut cells = CellList::new(domain, reach, particles.len());
         let mut home = Vec::with_capacity(particles.len());
         for idx in 0..particles.len() {
-            let (col, row) = cells.cell_of(particles.x[idx], particles.y[idx]);
-            cells.insert(idx as u32, cells.index(col, row));
+            let (col, row) = cells.grid.cell_of(particles.x[idx], particles.y[idx]);
+            cells.insert(idx as u32, cells.grid.index(col, row));
             home.push((col, row));
         }
         for (i, &(col, row)) in home.iter().enumerate() {
-            for neighbour in cells.neighbourhood(col, row) {
+            for neighbour in cells.grid.neighbourhood(col, row) {
                 let mut j = cells.first_in_cell(neighbour.cell);
                 while j != NONE {
                     let j_idx = j as usize;
