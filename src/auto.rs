@@ -46,22 +46,25 @@ pub struct Measured {
     pub event_observed_disks_per_s: f64,
 }
 
-/// The cost model, measured in one run of
+/// The cost model, measured by
 /// `cargo bench --features mpi --bench kernels -- '^(step|event)/'` on one idle machine
-/// (README, Accuracy: choosing automatically), so that the two methods' rates compare
-/// even where the machine differs: by N (rows), packing 0.05 then 0.3.
+/// (README, Accuracy: choosing automatically), both methods in the same runs so that
+/// their rates compare even where the machine differs: the median of three runs within
+/// 40 minutes (this VM's speed drifted by up to 35% between them; the observation
+/// rates from the last, the first to time them with the state cold in the caches).
+/// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [
-        measured(1e4, 0.05, 53.8e6, 1.06e6, 560e6),
-        measured(1e4, 0.3, 34.8e6, 1.90e6, 587e6),
+        measured(1e4, 0.05, 47.7e6, 0.947e6, 432e6),
+        measured(1e4, 0.3, 34.8e6, 1.49e6, 457e6),
     ],
     [
-        measured(1e5, 0.05, 35.4e6, 0.378e6, 516e6),
-        measured(1e5, 0.3, 34.4e6, 0.621e6, 546e6),
+        measured(1e5, 0.05, 40.0e6, 0.235e6, 68.0e6),
+        measured(1e5, 0.3, 25.5e6, 0.612e6, 90.6e6),
     ],
     [
-        measured(1e6, 0.05, 25.2e6, 0.252e6, 98.6e6),
-        measured(1e6, 0.3, 27.4e6, 0.472e6, 127e6),
+        measured(1e6, 0.05, 25.2e6, 0.190e6, 79.6e6),
+        measured(1e6, 0.3, 26.6e6, 0.456e6, 110e6),
     ],
 ];
 
