@@ -1,7 +1,8 @@
 //! Criterion benches of the simulator's kernels: one full serial step (and, as a
-//! yardstick, one step of a straightforward cell list), the broad phase
+//! yardstick, one step of a skilled cell-list code: `yardstick/mod.rs`), the broad phase
 //! (grid build and pair search) and the contact resolution at N = 100,000; one full step
-//! of the serial and the rayon (2 threads) backends at N = 1,000,000; and one step of
+//! of the serial and the rayon (2 threads) backends and of the yardstick at N = 1,000,000;
+//! and one step of
 //! the distributed backend on 2 ranks as threads (`ThreadComm`) at N = 100,000, through
 //! the same stepping loop (`backend::step_loop`) that `collide simulate` and
 //! `collide check` time. Each for a dilute and a dense gas.
@@ -11,20 +12,25 @@
 //! method. The `step` and `event` groups run both methods on the same periodic gases at
 //! N = 10^4, 10^5 and 10^6: they are the cost model of `method = "auto"`.
 //! Run: `cargo bench --bench kernels` (MPI runs need `mpirun`: see the README's Speed section).
+//! `COLLIDE_YARDSTICK_ONLY=1 cargo bench --bench kernels` prints only the yardstick's rate
+//! (particle-steps per second of 50 steps, wall time) on the scenes `collide simulate`
+//! builds from a scene file with n, packing, radius = 1, mass = 1, speed_rms = 1,
+//! boundary = "walls", restitution = 1, seed = 42 and dt = 0.1.
 
 use std::time::{Duration, Instant};
 
-use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group};
 
 use collide::backend::comm::ThreadComm;
 use collide::backend::distributed;
 use collide::backend::threads::ThreadedStepper;
-use collide::sim::collision::resolve_contact;
 use collide::sim::event::{EventParams, EventSim};
 use collide::sim::scene::GasSpec;
-use collide::sim::step::advance_disks;
-use collide::sim::{Boundary, Broadphase, Domain, Particles, Physics, Scene, StepParams, Stepper};
+use collide::sim::{Boundary, Broadphase, Particles, Scene, StepParams, Stepper};
 use collide::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
+
+mod yardstick;
+use yardstick::CellListYardstick;
 
 /// r = 1 and v_rms = 1 stepped with dt = 0.1, so v_rms·dt = 0.1·r.
 const PARAMS: StepParams = StepParams {
@@ -32,6 +38,8 @@ const PARAMS: StepParams = StepParams {
     broadphase: Broadphase::Grid,
 };
 const WARM_UP_STEPS: usize = 50;
+/// The yardstick's name in the `serial` and `step_1e6` groups.
+const YARDSTICK: &str = "cell_list_yardstick";
 
 fn gas_spec(n_particles: usize, packing: f64) -> GasSpec {
     GasSpec {
@@ -56,98 +64,30 @@ fn warmed_up_serial(scene: &Scene) -> (Particles, Stepper) {
     (particles, stepper)
 }
 
-/// Issue 2's yardstick, "a straightforward cell-list code", benched beside our step so
-/// that their ratio is measured in one run on one machine: square cells one contact
-/// diameter wide rebuilt by a counting sort every step, each disk tested against the rest
-/// of its cell and the four forward neighbour cells, contacts resolved as found (with
-/// our impulse law and motion, so only the search and its order differ; walls only).
-struct StraightforwardCellList {
-    domain: Domain,
-    physics: Physics,
-    cell: f64,
-    nx: usize,
-    ny: usize,
-    /// Start of each cell's disks in `order`, and one past the last.
-    starts: Vec<usize>,
-    order: Vec<usize>,
-}
-
-impl StraightforwardCellList {
-    fn new(scene: &Scene) -> Self {
-        let cell = 2.0 * scene.particles.max_radius();
-        let nx = ((scene.domain.width / cell) as usize).max(1);
-        let ny = ((scene.domain.height / cell) as usize).max(1);
-        StraightforwardCellList {
-            domain: scene.domain,
-            physics: scene.physics,
-            cell: scene.domain.width / nx as f64,
-            nx,
-            ny,
-            starts: vec![0; nx * ny + 1],
-            order: vec![0; scene.particles.len()],
-        }
+/// The yardstick for `scene`, checked against our serial stepper after the same
+/// [`WARM_UP_STEPS`] from the same scene (`ours`): the yardstick must conserve energy
+/// (the gas is elastic) and apply about as many pair impulses as we do (the order of
+/// impulses differs, so the trajectories do too, not the collision rate).
+fn checked_yardstick(scene: &Scene, ours: &Stepper) -> CellListYardstick {
+    let mut yardstick = CellListYardstick::new(scene, PARAMS.dt);
+    let energy_before = yardstick.kinetic_energy();
+    for _ in 0..WARM_UP_STEPS {
+        yardstick.step();
     }
-
-    fn cell_of(&self, x: f64, y: f64) -> usize {
-        let cx = ((x / self.cell) as usize).min(self.nx - 1);
-        let cy = ((y / self.cell) as usize).min(self.ny - 1);
-        cy * self.nx + cx
-    }
-
-    fn step(&mut self, particles: &mut Particles) {
-        advance_disks(
-            &self.domain,
-            &self.physics,
-            PARAMS.dt,
-            particles.disk_slices_mut(),
-        );
-        self.starts.fill(0);
-        for i in 0..particles.len() {
-            let c = self.cell_of(particles.x[i], particles.y[i]);
-            self.starts[c + 1] += 1;
-        }
-        for c in 0..self.nx * self.ny {
-            self.starts[c + 1] += self.starts[c];
-        }
-        let mut next = self.starts.clone();
-        for i in 0..particles.len() {
-            let c = self.cell_of(particles.x[i], particles.y[i]);
-            self.order[next[c]] = i;
-            next[c] += 1;
-        }
-        let (domain, e) = (self.domain, self.physics.restitution);
-        let test = |particles: &mut Particles, i: usize, j: usize| {
-            let (dx, dy) = (
-                particles.x[j] - particles.x[i],
-                particles.y[j] - particles.y[i],
-            );
-            let contact = particles.radius[i] + particles.radius[j];
-            if dx * dx + dy * dy < contact * contact {
-                resolve_contact(particles, &domain, e, i, j);
-            }
-        };
-        for cy in 0..self.ny {
-            for cx in 0..self.nx {
-                let here = self.starts[cy * self.nx + cx]..self.starts[cy * self.nx + cx + 1];
-                for a in here.clone() {
-                    let i = self.order[a];
-                    for b in a + 1..here.end {
-                        test(particles, i, self.order[b]);
-                    }
-                    for (ox, oy) in [(1, 0), (-1, 1), (0, 1), (1, 1)] {
-                        let (nx, ny) = (cx as isize + ox, cy as isize + oy);
-                        if nx < 0 || nx >= self.nx as isize || ny >= self.ny as isize {
-                            continue;
-                        }
-                        let c = ny as usize * self.nx + nx as usize;
-                        for b in self.starts[c]..self.starts[c + 1] {
-                            test(particles, i, self.order[b]);
-                        }
-                    }
-                }
-            }
-        }
-    }
+    let drift = (yardstick.kinetic_energy() / energy_before - 1.0).abs();
+    assert!(
+        drift < 1e-9,
+        "the yardstick changed the energy by {drift:e}"
+    );
+    let (theirs, ours) = (
+        yardstick.pair_impulses() as f64,
+        ours.counters().pair_collisions as f64,
+    );
+    assert!(
+        (theirs / ours - 1.0).abs() < 0.05,
+        "the yardstick applied {theirs} pair impulses, our stepper {ours}"
+    );
+    yardstick
 }
 
 fn serial_kernels(c: &mut Criterion) {
@@ -156,22 +96,15 @@ fn serial_kernels(c: &mut Criterion) {
     group.throughput(Throughput::Elements(N as u64));
     group.sample_size(30);
     for packing in [0.05, 0.3] {
-        let (mut particles, mut stepper) = warmed_up_serial(&gas(N, packing));
+        let scene = gas(N, packing);
+        let (mut particles, mut stepper) = warmed_up_serial(&scene);
         group.bench_function(BenchmarkId::new("step", packing), |b| {
             b.iter(|| stepper.step(&mut particles));
         });
-        let scene = gas(N, packing);
-        let mut yardstick = StraightforwardCellList::new(&scene);
-        let mut plain = scene.particles.clone();
-        for _ in 0..WARM_UP_STEPS {
-            yardstick.step(&mut plain);
-        }
-        group.bench_function(
-            BenchmarkId::new("straightforward_cell_list_step", packing),
-            |b| {
-                b.iter(|| yardstick.step(&mut plain));
-            },
-        );
+        let mut yardstick = checked_yardstick(&scene, &stepper);
+        group.bench_function(BenchmarkId::new(YARDSTICK, packing), |b| {
+            b.iter(|| yardstick.step());
+        });
         group.bench_function(BenchmarkId::new("broad_phase", packing), |b| {
             b.iter(|| stepper.find_contacts(&mut particles));
         });
@@ -200,6 +133,10 @@ fn backend_steps(c: &mut Criterion) {
         let (mut particles, mut stepper) = warmed_up_serial(&scene);
         group.bench_function(BenchmarkId::new("serial", packing), |b| {
             b.iter(|| stepper.step(&mut particles));
+        });
+        let mut yardstick = checked_yardstick(&scene, &stepper);
+        group.bench_function(BenchmarkId::new(YARDSTICK, packing), |b| {
+            b.iter(|| yardstick.step());
         });
         let mut particles = scene.particles.clone();
         let mut threaded = ThreadedStepper::new(scene.domain, scene.physics, PARAMS, &particles, 2);
@@ -324,6 +261,36 @@ fn distributed_step(c: &mut Criterion) {
     group.finish();
 }
 
+/// The yardstick's rate outside criterion, for comparing with `collide simulate --json`
+/// on the same scenes: for N = 10⁵ and 10⁶ and packings 0.05 and 0.3, the median of 3
+/// runs of [`TIMED_STEPS`] steps (wall time), each from the placed scene after
+/// [`UNTIMED_STEPS`] steps.
+fn yardstick_rates() {
+    const UNTIMED_STEPS: usize = 10;
+    const TIMED_STEPS: usize = 50;
+    println!("yardstick N packing steps rate_M/s");
+    for n in [100_000, 1_000_000] {
+        for packing in [0.05, 0.3] {
+            let scene = gas(n, packing);
+            let mut rates: Vec<f64> = (0..3)
+                .map(|_| {
+                    let mut yardstick = CellListYardstick::new(&scene, PARAMS.dt);
+                    for _ in 0..UNTIMED_STEPS {
+                        yardstick.step();
+                    }
+                    let start = Instant::now();
+                    for _ in 0..TIMED_STEPS {
+                        yardstick.step();
+                    }
+                    (n * TIMED_STEPS) as f64 / start.elapsed().as_secs_f64() / 1e6
+                })
+                .collect();
+            rates.sort_by(f64::total_cmp);
+            println!("yardstick {n} {packing} {TIMED_STEPS} {:.1}", rates[1]);
+        }
+    }
+}
+
 criterion_group!(
     benches,
     serial_kernels,
@@ -331,4 +298,13 @@ criterion_group!(
     distributed_step,
     cost_model
 );
-criterion_main!(benches);
+
+/// `criterion_main!`, unless `COLLIDE_YARDSTICK_ONLY=1` asks for the yardstick's rates only.
+fn main() {
+    if std::env::var_os("COLLIDE_YARDSTICK_ONLY").is_some_and(|v| v == "1") {
+        yardstick_rates();
+        return;
+    }
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}
