@@ -24,6 +24,7 @@ use criterion::{BenchmarkId, Criterion, Throughput, criterion_group};
 use collide::backend::comm::ThreadComm;
 use collide::backend::distributed;
 use collide::backend::threads::ThreadedStepper;
+use collide::backend::{CpuScope, cpu_seconds};
 use collide::sim::event::{EventParams, EventSim};
 use collide::sim::scene::GasSpec;
 use collide::sim::{Boundary, Broadphase, Particles, Scene, StepParams, Stepper};
@@ -263,30 +264,37 @@ fn distributed_step(c: &mut Criterion) {
 
 /// The yardstick's rate outside criterion, for comparing with `collide simulate --json`
 /// on the same scenes: for N = 10⁵ and 10⁶ and packings 0.05 and 0.3, the median of 3
-/// runs of [`TIMED_STEPS`] steps (wall time), each from the placed scene after
+/// runs of [`TIMED_STEPS`] steps (wall time, and the thread's CPU time, which a loaded
+/// machine inflates less), each from the placed scene after
 /// [`UNTIMED_STEPS`] steps.
 fn yardstick_rates() {
     const UNTIMED_STEPS: usize = 10;
     const TIMED_STEPS: usize = 50;
-    println!("yardstick N packing steps rate_M/s");
+    println!("yardstick N packing steps rate_M/s cpu_rate_M/s");
     for n in [100_000, 1_000_000] {
         for packing in [0.05, 0.3] {
             let scene = gas(n, packing);
-            let mut rates: Vec<f64> = (0..3)
+            let particle_steps = (n * TIMED_STEPS) as f64;
+            let (mut wall_s, mut cpu_s): (Vec<f64>, Vec<f64>) = (0..3)
                 .map(|_| {
                     let mut yardstick = CellListYardstick::new(&scene, PARAMS.dt);
                     for _ in 0..UNTIMED_STEPS {
                         yardstick.step();
                     }
-                    let start = Instant::now();
+                    let (start, cpu_start) = (Instant::now(), thread_cpu_s());
                     for _ in 0..TIMED_STEPS {
                         yardstick.step();
                     }
-                    (n * TIMED_STEPS) as f64 / start.elapsed().as_secs_f64() / 1e6
+                    (start.elapsed().as_secs_f64(), thread_cpu_s() - cpu_start)
                 })
-                .collect();
-            rates.sort_by(f64::total_cmp);
-            println!("yardstick {n} {packing} {TIMED_STEPS} {:.1}", rates[1]);
+                .unzip();
+            wall_s.sort_by(f64::total_cmp);
+            cpu_s.sort_by(f64::total_cmp);
+            println!(
+                "yardstick {n} {packing} {TIMED_STEPS} {:.1} {:.1}",
+                particle_steps / wall_s[1] / 1e6,
+                particle_steps / cpu_s[1] / 1e6
+            );
         }
     }
 }
@@ -298,6 +306,12 @@ criterion_group!(
     distributed_step,
     cost_model
 );
+
+/// CPU seconds of the calling thread: on a loaded machine, close to what the thread
+/// would have taken alone (caches are shared).
+fn thread_cpu_s() -> f64 {
+    cpu_seconds(CpuScope::Thread).expect("Linux has per-thread CPU clocks")
+}
 
 /// `criterion_main!`, unless `COLLIDE_YARDSTICK_ONLY=1` asks for the yardstick's rates only.
 fn main() {
