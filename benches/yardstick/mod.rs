@@ -35,11 +35,6 @@ pub enum CellSide {
     OneDiskPerCell,
 }
 
-/// Whether the drift is written back before the sort (`false`: a drift pass, then a pass
-/// that copies into cell order) or computed again in the copy (`true`: the counting pass
-/// only reads, the copy writes the moved disks once).
-pub const FUSED_DRIFT: bool = false;
-
 /// The disks in structure-of-arrays form.
 #[derive(Clone, Debug, Default)]
 struct Arrays {
@@ -162,77 +157,64 @@ impl CellListYardstick {
 
     /// Moves the disks by one dt, reflects those touching a wall while moving outward,
     /// and stores them in cell order in the spare arrays, which then become the disks.
+    #[inline(never)]
     fn sort_moved(&mut self) {
-        let (dt, grid) = (self.dt, self.grid);
-        let (width, height, e_wall) = (self.width, self.height, self.wall_restitution);
-        // The same arithmetic as `collide::sim::step::advance_disks` without a field.
-        let moved = |p: f64, v: f64, r: f64, length: f64| {
-            let p = p + v * dt;
-            let outward = (p - r < 0.0 && v < 0.0) || (p + r > length && v > 0.0);
-            (p, if outward { v * -e_wall } else { v })
-        };
-        self.bounds.fill(0);
-        let n = self.disks.x.len();
-        if FUSED_DRIFT {
-            let d = &self.disks;
-            for i in 0..n {
-                let (x, _) = moved(d.x[i], d.vx[i], d.radius[i], width);
-                let (y, _) = moved(d.y[i], d.vy[i], d.radius[i], height);
-                let c = grid.cell(x, y);
-                self.cell_of[i] = c as u32;
-                self.bounds[c + 2] += 1;
+        let (dt, grid, e_wall) = (self.dt, self.grid, self.wall_restitution);
+        let d = &mut self.disks;
+        let n = d.x.len();
+        // The same arithmetic as `collide::sim::step::advance_disks` without a field, one
+        // axis at a time: branch-free, so the compiler vectorises it.
+        for (p, v, length) in [
+            (&mut d.x, &mut d.vx, self.width),
+            (&mut d.y, &mut d.vy, self.height),
+        ] {
+            for ((p, v), &r) in p.iter_mut().zip(v.iter_mut()).zip(&d.radius) {
+                let moved = *p + *v * dt;
+                let outward = (moved - r < 0.0) & (*v < 0.0) | (moved + r > length) & (*v > 0.0);
+                *p = moved;
+                *v = if outward { *v * -e_wall } else { *v };
             }
-        } else {
-            let d = &mut self.disks;
-            for i in 0..n {
-                let (x, vx) = moved(d.x[i], d.vx[i], d.radius[i], width);
-                let (y, vy) = moved(d.y[i], d.vy[i], d.radius[i], height);
-                (d.x[i], d.vx[i], d.y[i], d.vy[i]) = (x, vx, y, vy);
-                let c = grid.cell(x, y);
-                self.cell_of[i] = c as u32;
-                self.bounds[c + 2] += 1;
-            }
+        }
+        let bounds = &mut self.bounds[..];
+        bounds.fill(0);
+        let cell_of = &mut self.cell_of[..n];
+        for ((&x, &y), cell) in d.x.iter().zip(&d.y).zip(cell_of.iter_mut()) {
+            let c = grid.cell(x, y);
+            *cell = c as u32;
+            bounds[c + 2] += 1;
         }
         // Counts at c + 2, summed: bounds[c + 1] is where cell c starts; the copy moves
         // it on to where c ends, which is where c + 1 starts. bounds[0] stays 0.
         let mut total = 0;
-        for b in &mut self.bounds {
+        for b in bounds.iter_mut() {
             total += *b;
             *b = total;
         }
-        let (d, s) = (&self.disks, &mut self.spare);
-        for i in 0..n {
-            let c = self.cell_of[i] as usize;
-            let at = self.bounds[c + 1] as usize;
-            self.bounds[c + 1] += 1;
-            if FUSED_DRIFT {
-                let (x, vx) = moved(d.x[i], d.vx[i], d.radius[i], width);
-                let (y, vy) = moved(d.y[i], d.vy[i], d.radius[i], height);
-                (s.x[at], s.vx[at], s.y[at], s.vy[at]) = (x, vx, y, vy);
-            } else {
-                (s.x[at], s.vx[at], s.y[at], s.vy[at]) = (d.x[i], d.vx[i], d.y[i], d.vy[i]);
-            }
-            s.radius[at] = d.radius[i];
-            s.mass[at] = d.mass[i];
-            s.id[at] = d.id[i];
+        // Slices of one length n: one bounds check per destination index.
+        let s = &mut self.spare;
+        let (sx, sy, svx, svy) = (&mut s.x[..n], &mut s.y[..n], &mut s.vx[..n], &mut s.vy[..n]);
+        let (sr, sm, sid) = (&mut s.radius[..n], &mut s.mass[..n], &mut s.id[..n]);
+        let (x, y, vx, vy) = (&d.x[..n], &d.y[..n], &d.vx[..n], &d.vy[..n]);
+        let (r, m, id) = (&d.radius[..n], &d.mass[..n], &d.id[..n]);
+        for (i, &c) in cell_of.iter().enumerate() {
+            let slot = &mut bounds[c as usize + 1];
+            let at = *slot as usize;
+            *slot += 1;
+            (sx[at], sy[at], svx[at], svy[at]) = (x[i], y[i], vx[i], vy[i]);
+            (sr[at], sm[at], sid[at]) = (r[i], m[i], id[i]);
         }
         std::mem::swap(&mut self.disks, &mut self.spare);
     }
 
     /// Tests each disk against the later disks of its cell, the east cell and the three
     /// cells above, resolving each overlapping, approaching pair as it is found.
+    #[inline(never)]
     fn sweep(&mut self) {
         let e = self.restitution;
-        let Arrays {
-            x,
-            y,
-            vx,
-            vy,
-            radius,
-            mass,
-            ..
-        } = &mut self.disks;
-        let (x, y, radius, mass) = (&x[..], &y[..], &radius[..], &mass[..]);
+        let d = &mut self.disks;
+        let n = d.x.len();
+        let (x, y, radius, mass) = (&d.x[..n], &d.y[..n], &d.radius[..n], &d.mass[..n]);
+        let (vx, vy) = (&mut d.vx[..n], &mut d.vy[..n]);
         let bounds = &self.bounds[..];
         let Grid { nx, ny, stride, .. } = self.grid;
         let mut impulses = 0;
@@ -244,31 +226,25 @@ impl CellListYardstick {
                     continue;
                 }
                 let east_end = bounds[c + 2] as usize;
-                let above = bounds[c + stride - 1] as usize..bounds[c + stride + 2] as usize;
+                let (above_start, above_end) = (
+                    bounds[c + stride - 1] as usize,
+                    bounds[c + stride + 2] as usize,
+                );
                 for i in start..end {
                     let (xi, yi, ri) = (x[i], y[i], radius[i]);
-                    for run in [i + 1..east_end, above.clone()] {
-                        let from = run.start;
-                        let candidates =
-                            x[run.clone()].iter().zip(&y[run.clone()]).zip(&radius[run]);
-                        for (k, ((&xj, &yj), &rj)) in candidates.enumerate() {
+                    let mut scan = |from: usize, to: usize| {
+                        let run = x[from..to].iter().zip(&y[from..to]).zip(&radius[from..to]);
+                        for (k, ((&xj, &yj), &rj)) in run.enumerate() {
                             let (dx, dy) = (xj - xi, yj - yi);
                             let contact = ri + rj;
                             if dx * dx + dy * dy < contact * contact {
-                                impulses += u64::from(impulse(
-                                    e,
-                                    i,
-                                    from + k,
-                                    dx,
-                                    dy,
-                                    contact,
-                                    mass,
-                                    vx,
-                                    vy,
-                                ));
+                                let hit = impulse(e, i, from + k, dx, dy, contact, mass, vx, vy);
+                                impulses += u64::from(hit);
                             }
                         }
-                    }
+                    };
+                    scan(i + 1, east_end);
+                    scan(above_start, above_end);
                 }
             }
         }
