@@ -162,23 +162,22 @@ impl CellListYardstick {
         let (dt, grid, e_wall) = (self.dt, self.grid, self.wall_restitution);
         let d = &mut self.disks;
         let n = d.x.len();
-        // The same arithmetic as `collide::sim::step::advance_disks` without a field, one
-        // axis at a time: branch-free, so the compiler vectorises it.
-        for (p, v, length) in [
-            (&mut d.x, &mut d.vx, self.width),
-            (&mut d.y, &mut d.vy, self.height),
-        ] {
-            for ((p, v), &r) in p.iter_mut().zip(v.iter_mut()).zip(&d.radius) {
-                let moved = *p + *v * dt;
-                let outward = (moved - r < 0.0) & (*v < 0.0) | (moved + r > length) & (*v > 0.0);
-                *p = moved;
-                *v = if outward { *v * -e_wall } else { *v };
-            }
-        }
+        let (width, height) = (self.width, self.height);
+        // The same arithmetic as `collide::sim::step::advance_disks` without a field,
+        // branch-free.
+        let moved = |p: f64, v: f64, r: f64, length: f64| {
+            let moved = p + v * dt;
+            let outward = (moved - r < 0.0) & (v < 0.0) | (moved + r > length) & (v > 0.0);
+            (moved, if outward { v * -e_wall } else { v })
+        };
         let bounds = &mut self.bounds[..];
         bounds.fill(0);
         let cell_of = &mut self.cell_of[..n];
-        for ((&x, &y), cell) in d.x.iter().zip(&d.y).zip(cell_of.iter_mut()) {
+        let (x, y, vx, vy) = (&d.x[..n], &d.y[..n], &d.vx[..n], &d.vy[..n]);
+        let (r, m, id) = (&d.radius[..n], &d.mass[..n], &d.id[..n]);
+        for (i, cell) in cell_of.iter_mut().enumerate() {
+            let (x, _) = moved(x[i], vx[i], r[i], width);
+            let (y, _) = moved(y[i], vy[i], r[i], height);
             let c = grid.cell(x, y);
             *cell = c as u32;
             bounds[c + 2] += 1;
@@ -194,13 +193,12 @@ impl CellListYardstick {
         let s = &mut self.spare;
         let (sx, sy, svx, svy) = (&mut s.x[..n], &mut s.y[..n], &mut s.vx[..n], &mut s.vy[..n]);
         let (sr, sm, sid) = (&mut s.radius[..n], &mut s.mass[..n], &mut s.id[..n]);
-        let (x, y, vx, vy) = (&d.x[..n], &d.y[..n], &d.vx[..n], &d.vy[..n]);
-        let (r, m, id) = (&d.radius[..n], &d.mass[..n], &d.id[..n]);
         for (i, &c) in cell_of.iter().enumerate() {
             let slot = &mut bounds[c as usize + 1];
             let at = *slot as usize;
             *slot += 1;
-            (sx[at], sy[at], svx[at], svy[at]) = (x[i], y[i], vx[i], vy[i]);
+            (sx[at], svx[at]) = moved(x[i], vx[i], r[i], width);
+            (sy[at], svy[at]) = moved(y[i], vy[i], r[i], height);
             (sr[at], sm[at], sid[at]) = (r[i], m[i], id[i]);
         }
         std::mem::swap(&mut self.disks, &mut self.spare);
