@@ -2,10 +2,9 @@
 //! yardstick, one step of a skilled cell-list code: `yardstick/mod.rs`), the broad phase
 //! (grid build and pair search) and the contact resolution at N = 100,000; one full step
 //! of the serial and the rayon (2 threads) backends and of the yardstick at N = 1,000,000;
-//! and one step of
-//! the distributed backend on 2 ranks as threads (`ThreadComm`) at N = 100,000, through
-//! the same stepping loop (`backend::step_loop`) that `collide simulate` and
-//! `collide check` time. Each for a dilute and a dense gas.
+//! and one step of the distributed backend on 2 ranks as threads (`ThreadComm`) at
+//! N = 100,000, through the same stepping loop (`backend::step_loop`) that
+//! `collide simulate` and `collide check` time. Each for a dilute and a dense gas.
 //!
 //! Throughput is in disks per iteration, so criterion's "elem/s" is particle-steps per second;
 //! in the `event` group it is collisions (pair and wall) per second of the event-driven

@@ -5,35 +5,37 @@
 //!
 //! - Structure of arrays in f64 (x, y, vx, vy, radius, mass, and the disks' ids).
 //! - A uniform grid whose cells are at least one contact diameter (2·r_max) wide and
-//!   hold about one disk each in a dilute gas: side max(2·r_max, sqrt(area / N)).
+//!   hold about two disks each in a dilute gas: side max(2·r_max, sqrt(2·area / N)).
 //!   A column of empty cells at each side and a row of empty cells on top make every
 //!   neighbour of a real cell exist, so the sweep has no edge tests.
-//! - Every step one pass moves the disks, reflects them at the walls and counts them per
-//!   cell (cell index by multiplication with the inverse side); a counting sort then
-//!   copies them, all fields, into the spare arrays in cell order, and the two sets of
-//!   arrays swap. Pair tests read contiguous memory.
+//! - Every step a counting sort rebuilds the grid: one pass computes where each disk
+//!   moves in this step (and whether a wall reflects it) and counts the disks per cell
+//!   (cell index by multiplication with the inverse side); a second pass writes every
+//!   disk, moved, with all its fields into the spare arrays in cell order, and the two
+//!   sets of arrays swap. Pair tests read contiguous memory.
 //! - A half-shell sweep in cell order: the rest of the disk's own cell and the east
 //!   cell, which follow it in memory, then the north-west, north and north-east cells,
 //!   which are contiguous too. So each disk scans two runs of consecutive disks.
 //! - A pair that overlaps and approaches gets its impulse as soon as it is found.
 //!
-//! Variants measured (N = 10⁵, packings 0.05 / 0.3, M particle-steps/s, same machine, see
-//! the bench's `COLLIDE_YARDSTICK_ONLY` mode) are listed at [`CELL_SIDE`] and [`FUSED_DRIFT`].
+//! Variants measured and dropped (the bench's `COLLIDE_YARDSTICK_ONLY=1` mode, CPU-time
+//! rates on a loaded 2-core machine, runs interleaved; M particle-steps/s at N = 10⁵ and
+//! 10⁶, packings 0.05 / 0.3, same order in each cell of the list):
+//! - A drift pass writing the moved disks back, then a copy into cell order, instead of
+//!   the move computed in both passes of the sort: 28–36 / 24–33 against 35–40 /
+//!   30–36 for the fused move (the copy writes each disk once, the counting pass only
+//!   reads). Callgrind: 115 against 148 instructions per disk for the sort, yet slower.
+//! - Cells one contact diameter wide: 16 / 29 at 10⁵ and 14 / 22 at 10⁶ (dilute cells
+//!   are mostly empty, and each is visited), against 31 / 27 and 32 / 27 for cells of
+//!   about one disk.
+//! - Cells of about one disk (side sqrt(area / N)): 35–40 / 29–38 at 10⁵ and 29–35 /
+//!   29–32 at 10⁶; about two disks (side sqrt(2·area / N), kept): 39–41 / 37–38 and
+//!   35–36 / 32–33; about four (side 2·sqrt(area / N)): 32 / 30 and 27 / 27.
+//! - Branchy wall tests and indexed loops over unequal-length arrays (bounds checks left
+//!   in): 342 instructions per disk and step against 280 now, 22 / 19–22 M/s.
 
 use collide::sim::collision::{PairSide, collide_pair};
 use collide::sim::{Boundary, Scene};
-
-/// How wide the cells are.
-pub const CELL_SIDE: CellSide = CellSide::OneDiskPerCell;
-
-/// How the cell side is chosen.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum CellSide {
-    /// One contact diameter, 2·r_max.
-    OneDiameter,
-    /// max(2·r_max, sqrt(area / N)): about one disk per cell when the gas is dilute.
-    OneDiskPerCell,
-}
 
 /// The disks in structure-of-arrays form.
 #[derive(Clone, Debug, Default)]
@@ -94,10 +96,8 @@ impl CellListYardstick {
         let p = &scene.particles;
         let n = p.len();
         let diameter = 2.0 * p.max_radius();
-        let side = match CELL_SIDE {
-            CellSide::OneDiameter => diameter,
-            CellSide::OneDiskPerCell => diameter.max((scene.domain.area() / n as f64).sqrt()),
-        };
+        // About two disks per cell in a dilute gas (see the module's notes).
+        let side = diameter.max((2.0 * scene.domain.area() / n as f64).sqrt());
         let nx = ((scene.domain.width / side) as usize).max(1);
         let ny = ((scene.domain.height / side) as usize).max(1);
         // Cells at least `side` wide: the box is cut into whole cells (x and y alike, a
@@ -157,6 +157,7 @@ impl CellListYardstick {
 
     /// Moves the disks by one dt, reflects those touching a wall while moving outward,
     /// and stores them in cell order in the spare arrays, which then become the disks.
+    // Not inlined, here and in `sweep`, so that profiles show the two halves apart.
     #[inline(never)]
     fn sort_moved(&mut self) {
         let (dt, grid, e_wall) = (self.dt, self.grid, self.wall_restitution);
