@@ -65,7 +65,7 @@ fn warmed_up_serial(scene: &Scene) -> (Particles, Stepper) {
 }
 
 /// The yardstick for `scene`, checked against our serial stepper after the same
-/// [`WARM_UP_STEPS`] from the same scene (`ours`): the yardstick must conserve energy
+/// [`WARM_UP_STEPS`] from the same scene (`ours`, not stepped since): the yardstick must conserve energy
 /// (the gas is elastic) and apply about as many pair impulses as we do (the order of
 /// impulses differs, so the trajectories do too, not the collision rate).
 fn checked_yardstick(scene: &Scene, ours: &Stepper) -> CellListYardstick {
@@ -87,6 +87,11 @@ fn checked_yardstick(scene: &Scene, ours: &Stepper) -> CellListYardstick {
         (theirs / ours - 1.0).abs() < 0.05,
         "the yardstick applied {theirs} pair impulses, our stepper {ours}"
     );
+    eprintln!(
+        "yardstick checked: {} disks, {WARM_UP_STEPS} steps, energy drift {drift:.1e}, \
+         {theirs} pair impulses against our {ours}",
+        scene.particles.len()
+    );
     yardstick
 }
 
@@ -98,10 +103,10 @@ fn serial_kernels(c: &mut Criterion) {
     for packing in [0.05, 0.3] {
         let scene = gas(N, packing);
         let (mut particles, mut stepper) = warmed_up_serial(&scene);
+        let mut yardstick = checked_yardstick(&scene, &stepper);
         group.bench_function(BenchmarkId::new("step", packing), |b| {
             b.iter(|| stepper.step(&mut particles));
         });
-        let mut yardstick = checked_yardstick(&scene, &stepper);
         group.bench_function(BenchmarkId::new(YARDSTICK, packing), |b| {
             b.iter(|| yardstick.step());
         });
@@ -131,10 +136,10 @@ fn backend_steps(c: &mut Criterion) {
     for packing in [0.05, 0.3] {
         let scene = gas(N, packing);
         let (mut particles, mut stepper) = warmed_up_serial(&scene);
+        let mut yardstick = checked_yardstick(&scene, &stepper);
         group.bench_function(BenchmarkId::new("serial", packing), |b| {
             b.iter(|| stepper.step(&mut particles));
         });
-        let mut yardstick = checked_yardstick(&scene, &stepper);
         group.bench_function(BenchmarkId::new(YARDSTICK, packing), |b| {
             b.iter(|| yardstick.step());
         });
