@@ -67,7 +67,9 @@ fn warmed_up_serial(scene: &Scene) -> (Particles, Stepper) {
 /// The yardstick for `scene`, checked against our serial stepper after the same
 /// [`WARM_UP_STEPS`] from the same scene (`ours`, not stepped since): the yardstick must conserve energy
 /// (the gas is elastic) and apply about as many pair impulses as we do (the order of
-/// impulses differs, so the trajectories do too, not the collision rate).
+/// impulses differs, so the trajectories do too, not the collision rate). The counts
+/// agree to 0.03% on the bench's gases; a sweep that skips the east cell, or the three
+/// cells above, applies 5% fewer impulses at packing 0.05: the bound of 0.5% catches it.
 fn checked_yardstick(scene: &Scene, ours: &Stepper) -> CellListYardstick {
     let mut yardstick = CellListYardstick::new(scene, PARAMS.dt);
     let energy_before = yardstick.kinetic_energy();
@@ -84,7 +86,7 @@ fn checked_yardstick(scene: &Scene, ours: &Stepper) -> CellListYardstick {
         ours.counters().pair_collisions as f64,
     );
     assert!(
-        (theirs / ours - 1.0).abs() < 0.05,
+        (theirs / ours - 1.0).abs() < 0.005,
         "the yardstick applied {theirs} pair impulses, our stepper {ours}"
     );
     eprintln!(
