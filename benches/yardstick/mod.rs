@@ -19,12 +19,13 @@
 //! - A pair that overlaps and approaches gets its impulse as soon as it is found.
 //!
 //! Variants measured and dropped (the bench's `COLLIDE_YARDSTICK_ONLY=1` mode, CPU-time
-//! rates on a loaded 2-core machine, runs interleaved; M particle-steps/s at N = 10⁵ and
-//! 10⁶, packings 0.05 / 0.3, same order in each cell of the list):
+//! rates on a loaded 2-core machine, runs interleaved; M particle-steps/s, written
+//! packing 0.05 / packing 0.3):
 //! - A drift pass writing the moved disks back, then a copy into cell order, instead of
-//!   the move computed in both passes of the sort: 28–36 / 24–33 against 35–40 /
-//!   30–36 for the fused move (the copy writes each disk once, the counting pass only
-//!   reads). Callgrind: 115 against 148 instructions per disk for the sort, yet slower.
+//!   the move computed in both passes of the sort: 29–36 / 32–36 at N = 10⁵ and
+//!   28–33 / 24–30 at 10⁶, against 39–40 / 37 and 35–36 / 32 for the fused move (the
+//!   copy writes each disk once, the counting pass only reads). Callgrind: 115 against
+//!   148 instructions per disk for the sort, yet slower.
 //! - Cells one contact diameter wide: 16 / 29 at 10⁵ and 14 / 22 at 10⁶ (dilute cells
 //!   are mostly empty, and each is visited), against 31 / 27 and 32 / 27 for cells of
 //!   about one disk.
