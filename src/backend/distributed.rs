@@ -39,11 +39,7 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     // Every rank builds the same initial state from the seed and keeps its slab.
     let prepared = spec.prepare()?;
     let scene = &prepared.scene;
-    let layout = StripLayout::new(
-        &scene.domain,
-        scene.particles.max_radius(),
-        scene.particles.len(),
-    );
+    let layout = StripLayout::new(&scene.domain, &scene.particles);
     let slabs = slabs(&layout, &scene.particles, comm.size())?;
     let mut rank = RankState::new(comm, &prepared.scene, layout, &slabs);
     let setup_s = setup_start.elapsed().as_secs_f64();
@@ -532,11 +528,7 @@ mod tests {
         let spec = spec(Boundary::Walls, 1.0, 0.05);
         let prepared = spec.prepare().unwrap();
         let particles = &prepared.scene.particles;
-        let layout = StripLayout::new(
-            &prepared.scene.domain,
-            particles.max_radius(),
-            particles.len(),
-        );
+        let layout = StripLayout::new(&prepared.scene.domain, particles);
         let error = slabs(&layout, particles, layout.n_strips + 1).unwrap_err();
         assert!(error.to_string().contains("use at most"), "{error}");
         let cut = slabs(&layout, particles, 3).unwrap();
