@@ -77,6 +77,7 @@ pub struct StripLayout {
     reach: f64,
     /// The radius of every disk, when all are equal (the scan then skips reading radii).
     equal_radius: Option<f64>,
+    max_radius: f64,
 }
 
 impl StripLayout {
@@ -103,6 +104,7 @@ impl StripLayout {
             width: domain.width,
             reach: contact * (1.0 + 1e-9),
             equal_radius: (particles.min_radius() == max_radius).then_some(max_radius),
+            max_radius,
         }
     }
 
@@ -360,6 +362,89 @@ impl StripGrid {
     ) {
         debug_assert!(self.layout.reach >= skin);
         self.scan_in(strips, domain, skin, &mut PairSink { pairs });
+    }
+
+    /// Appends every pair of a disk stored at one of `movers` and another disk that
+    /// overlap now, when no disk is further than `moved` from its position at the last
+    /// build (which the grid holds): a query around each mover of the strips and x
+    /// windows within `r_mover + max_radius + moved` of it. A pair may be appended
+    /// twice (by both its disks, or by this and a neighbour list): the caller sorts and
+    /// removes repeats. The overlap test is the scan's arithmetic.
+    pub fn find_contacts_of(
+        &self,
+        movers: &[u32],
+        moved: f64,
+        particles: &Particles,
+        domain: &Domain,
+        contacts: &mut Vec<Contact>,
+    ) {
+        debug_assert!(
+            self.first == 0 && self.strips.len() == self.n_owned,
+            "a whole grid"
+        );
+        match domain.boundary {
+            Boundary::Walls => self.query::<false>(movers, moved, particles, domain, contacts),
+            Boundary::Periodic => self.query::<true>(movers, moved, particles, domain, contacts),
+        }
+    }
+
+    fn query<const PERIODIC: bool>(
+        &self,
+        movers: &[u32],
+        moved: f64,
+        particles: &Particles,
+        domain: &Domain,
+        contacts: &mut Vec<Contact>,
+    ) {
+        let (x, y, radius) = (&particles.x, &particles.y, &particles.radius);
+        let n_strips = self.layout.n_strips as i64;
+        let width = self.layout.width;
+        for &mover in movers {
+            let a = mover as usize;
+            let (xa, ya) = (x[a], y[a]);
+            let reach = (radius[a] + self.layout.max_radius + moved) * (1.0 + 1e-9);
+            let inv_height = self.layout.inv_strip_height;
+            let lowest = ((ya - reach) * inv_height).floor() as i64;
+            let highest = ((ya + reach) * inv_height).floor() as i64;
+            let strips = if PERIODIC {
+                // Every strip once, even when the window wraps all the way round.
+                (lowest..=highest.min(lowest + n_strips - 1))
+                    .map(|s| s.rem_euclid(n_strips) as usize)
+                    .collect::<Vec<_>>()
+            } else {
+                (lowest.clamp(0, n_strips - 1)..=highest.clamp(0, n_strips - 1))
+                    .map(|s| s as usize)
+                    .collect()
+            };
+            // x windows of build positions: one, or two where a periodic window wraps.
+            let mut windows = vec![(xa - reach, xa + reach)];
+            if PERIODIC && reach < 0.5 * width {
+                if xa - reach < 0.0 {
+                    windows.push((xa - reach + width, width));
+                } else if xa + reach > width {
+                    windows.push((0.0, xa + reach - width));
+                }
+            } else if PERIODIC {
+                windows = vec![(f64::NEG_INFINITY, f64::INFINITY)];
+            }
+            for strip in strips {
+                let entries = &self.strips[strip][..];
+                for &(from, to) in &windows {
+                    let first = entries.partition_point(|b| b.x < from);
+                    for b in entries[first..].iter().take_while(|b| b.x < to) {
+                        let j = b.idx as usize;
+                        if j == a {
+                            continue;
+                        }
+                        let (dx, dy) = domain.separation_in::<PERIODIC>(xa, ya, x[j], y[j]);
+                        let contact = radius[a] + radius[j];
+                        if dx * dx + dy * dy < contact * contact {
+                            contacts.push(Contact::new(particles, a, j));
+                        }
+                    }
+                }
+            }
+        }
     }
 
     fn scan_in(&self, strips: Range<usize>, domain: &Domain, skin: f64, sink: &mut impl Sink) {

@@ -23,18 +23,22 @@ use super::scene::{Boundary, Domain};
 /// dense ones (0.3 and above), interpolated in between. A wider skin lists more pairs
 /// (about `ρ·π·(2r + skin)²/2` per disk) and is rebuilt less often: measured on gases at
 /// v_rms·dt = 0.1·r, these were the fastest (`docs/performance.md`).
-const SKIN_RADII_DILUTE: f64 = 2.5;
-const SKIN_RADII_DENSE: f64 = 1.5;
+const SKIN_RADII_DILUTE: f64 = 4.0;
+const SKIN_RADII_DENSE: f64 = 2.0;
 
 /// At most this many times the longest step a disk takes (its speed times dt): a list
 /// then lasts a few steps of the fastest disk. Slow scenes need only a thin skin.
-const SKIN_STEPS: f64 = 8.0;
+const SKIN_STEPS: f64 = 12.0;
 
 /// At least this many largest radii, so that a scene at rest (whose disks gravity will
 /// speed up) still gets a list that lasts a few steps.
 const MIN_SKIN_RADII: f64 = 0.25;
 
-/// Lists are rebuilt once a disk moved this fraction of half the skin: the margin
+/// Lists serve on while at most one disk in this many has moved half the skin (their
+/// pairs found by queries), and are rebuilt after.
+const MAX_ESCAPEE_SHARE: usize = 64;
+
+/// A disk escapes a list once it moved this fraction of half the skin: the margin
 /// covers rounding in the displacement and distance arithmetic.
 const SAFE_SKIN_FRACTION: f64 = 0.999;
 
@@ -152,6 +156,34 @@ impl Skin {
         largest.into_iter().fold(0.0, larger)
     }
 
+    /// Appends the storage indices of the disks that moved half the skin since the
+    /// last build: the lists may miss their pairs, and only theirs.
+    pub fn escapees(&self, particles: &Particles, domain: &Domain, escapees: &mut Vec<u32>) {
+        let half = 0.5 * SAFE_SKIN_FRACTION * self.width;
+        let positions = particles.x.iter().zip(&particles.y);
+        let built = self.x_built.iter().zip(&self.y_built);
+        for (idx, ((&x, &y), (&x0, &y0))) in positions.zip(built).enumerate() {
+            let (dx, dy) = domain.separation(x0, y0, x, y);
+            if !(dx * dx + dy * dy < half * half) {
+                escapees.push(idx as u32);
+            }
+        }
+    }
+
+    /// True when a list may serve `n_escapees` disks that moved at most
+    /// √`largest_displacement_sq`, with their pairs found by queries around them
+    /// (`StripGrid::find_contacts_of`): few of them, and not much further than the skin
+    /// (a query's cost grows with its reach). Otherwise the lists are rebuilt.
+    pub fn may_patch(
+        &self,
+        n_escapees: usize,
+        n_particles: usize,
+        largest_displacement_sq: f64,
+    ) -> bool {
+        n_escapees * MAX_ESCAPEE_SHARE <= n_particles
+            && largest_displacement_sq <= self.width * self.width
+    }
+
     /// Records the disks' positions as those of a build.
     pub fn record(&mut self, particles: &Particles) {
         self.x_built.clone_from(&particles.x);
@@ -252,6 +284,67 @@ impl PairList {
             let (dx, dy) = domain.separation_in::<PERIODIC>(xa, ya, xb, yb);
             if dx * dx + dy * dy < contact * contact {
                 contacts.push(Contact::new(particles, a, b));
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::sim::grid::StripGrid;
+    use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution};
+    use crate::sim::{Boundary, Broadphase, Physics, StepParams, Stepper};
+
+    /// Every step, the stepper's lists (with their rebuilds and escapee queries) find
+    /// exactly the pairs a fresh search of the whole box finds: walls and periodic,
+    /// unequal radii, dilute and dense, and steps long enough (up to half a radius for
+    /// the rms disk) that disks escape the lists often.
+    #[test]
+    fn listed_contacts_are_exactly_those_of_a_fresh_search_every_step() {
+        for boundary in [Boundary::Walls, Boundary::Periodic] {
+            for packing in [0.05, 0.35] {
+                for dt in [0.1, 0.5] {
+                    let scene = GasSpec {
+                        radius: RadiusDistribution::Uniform { min: 0.5, max: 1.5 },
+                        mass: MassRule::Area,
+                        boundary,
+                        physics: Physics::with_restitution(0.9),
+                        seed: 7,
+                        ..GasSpec::unit(3000, packing)
+                    }
+                    .build()
+                    .expect("places");
+                    let params = StepParams {
+                        dt,
+                        broadphase: Broadphase::Grid,
+                    };
+                    let mut particles = scene.particles.clone();
+                    let mut stepper = Stepper::for_scene(&scene, params);
+                    let mut rebuilt_or_patched = 0;
+                    for step in 0..150 {
+                        stepper.advance(&mut particles);
+                        stepper.find_contacts(&mut particles);
+                        rebuilt_or_patched += usize::from(!stepper.escapees.is_empty());
+                        let mut fresh = Vec::new();
+                        let mut grid = StripGrid::new(&scene.domain, &particles);
+                        grid.build(&particles);
+                        grid.find_contacts(&particles, &scene.domain, &mut fresh);
+                        fresh.sort_unstable_by_key(|contact| contact.key);
+                        let keys = |contacts: &[_]| -> Vec<u64> {
+                            contacts
+                                .iter()
+                                .map(|c: &crate::sim::grid::Contact| c.key)
+                                .collect()
+                        };
+                        assert_eq!(
+                            keys(stepper.contacts()),
+                            keys(&fresh),
+                            "{boundary:?} packing {packing} dt {dt} step {step}"
+                        );
+                        stepper.resolve_contacts(&mut particles);
+                    }
+                    assert!(rebuilt_or_patched > 0, "escapees were served at dt {dt}");
+                }
             }
         }
     }

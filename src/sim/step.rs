@@ -73,6 +73,8 @@ pub struct Stepper {
     grid: StripGrid,
     skin: Skin,
     neighbours: PairList,
+    /// Disks that moved half the skin since the list was built (this step's).
+    pub(crate) escapees: Vec<u32>,
     /// Grid builds since the disks were last stored in sorted order.
     builds_since_reorder: u32,
     contacts: Vec<Contact>,
@@ -94,6 +96,7 @@ impl Stepper {
             grid: StripGrid::with_skin(&domain, particles, skin.width()),
             skin,
             neighbours: PairList::default(),
+            escapees: Vec::new(),
             builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
             contacts: Vec::new(),
             counters: StepCounters::default(),
@@ -107,6 +110,11 @@ impl Stepper {
 
     pub fn counters(&self) -> StepCounters {
         self.counters
+    }
+
+    /// The pairs the last [`Stepper::find_contacts`] found, in canonical order.
+    pub fn contacts(&self) -> &[Contact] {
+        &self.contacts
     }
 
     /// One full step: move, apply the boundary, find overlaps, resolve them.
@@ -132,33 +140,70 @@ impl Stepper {
     pub fn find_contacts(&mut self, particles: &mut Particles) {
         self.contacts.clear();
         match self.params.broadphase {
-            Broadphase::Grid => {
-                if self.skin.is_stale(particles, &self.domain) {
-                    self.grid.build(particles);
-                    self.builds_since_reorder += 1;
-                    if self.builds_since_reorder >= REORDER_INTERVAL {
-                        // Storing disks in grid order keeps the next builds' reads
-                        // sequential. Results do not change: pair order and sums go by
-                        // id, not storage.
-                        particles.reorder(&self.grid.sorted_indices());
-                        self.grid.storage_now_sorted();
-                        self.builds_since_reorder = 0;
-                    }
-                    let strips = self.grid.owned();
-                    let (grid, skin) = (&self.grid, &self.skin);
-                    self.neighbours
-                        .rebuild(grid, strips, particles, &self.domain, skin);
-                    self.skin.record(particles);
-                }
-                self.neighbours
-                    .find_contacts(particles, &self.domain, &mut self.contacts);
-            }
+            Broadphase::Grid => self.find_contacts_listed(particles),
             Broadphase::AllPairs => {
                 find_contacts_all_pairs(particles, &self.domain, &mut self.contacts);
             }
         }
         // Canonical order: the result of resolution must not depend on how pairs were found.
         self.contacts.sort_unstable_by_key(|contact| contact.key);
+        // A pair of an escapee may have been found twice (see `find_contacts_listed`).
+        self.contacts.dedup_by_key(|contact| contact.key);
+    }
+
+    /// The overlapping pairs from the neighbour list, rebuilt when it is stale. Disks
+    /// that escaped it (moved half the skin), while few, have their pairs found by
+    /// queries of the grid instead of a rebuild.
+    fn find_contacts_listed(&mut self, particles: &mut Particles) {
+        let domain = &self.domain.clone();
+        let largest_sq = if self.skin.is_built_for(particles) {
+            self.skin
+                .largest_displacement_sq(0..particles.len(), particles, domain)
+        } else {
+            f64::INFINITY
+        };
+        self.escapees.clear();
+        if self.skin.is_exceeded(largest_sq) {
+            if largest_sq <= self.skin.width() * self.skin.width() {
+                self.skin.escapees(particles, domain, &mut self.escapees);
+            }
+            if !self
+                .skin
+                .may_patch(self.escapees.len(), particles.len(), largest_sq)
+            {
+                self.escapees.clear();
+                self.rebuild_list(particles);
+            }
+        }
+        self.neighbours
+            .find_contacts(particles, domain, &mut self.contacts);
+        if !self.escapees.is_empty() {
+            self.grid.find_contacts_of(
+                &self.escapees,
+                largest_sq.sqrt(),
+                particles,
+                domain,
+                &mut self.contacts,
+            );
+        }
+    }
+
+    /// Re-sorts the grid (every [`REORDER_INTERVAL`] builds, the disks too) and rebuilds
+    /// the neighbour list at the disks' positions.
+    fn rebuild_list(&mut self, particles: &mut Particles) {
+        self.grid.build(particles);
+        self.builds_since_reorder += 1;
+        if self.builds_since_reorder >= REORDER_INTERVAL {
+            // Storing disks in grid order keeps the next builds' reads sequential.
+            // Results do not change: pair order and sums go by id, not storage.
+            particles.reorder(&self.grid.sorted_indices());
+            self.grid.storage_now_sorted();
+            self.builds_since_reorder = 0;
+        }
+        let strips = self.grid.owned();
+        self.neighbours
+            .rebuild(&self.grid, strips, particles, &self.domain, &self.skin);
+        self.skin.record(particles);
     }
 
     /// Applies the impulse law to each found pair, in canonical order.
