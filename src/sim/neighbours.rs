@@ -105,8 +105,8 @@ impl Skin {
     /// True when a disk that moved √`largest_displacement_sq` makes the lists stale.
     pub fn is_exceeded(&self, largest_displacement_sq: f64) -> bool {
         let half = 0.5 * SAFE_SKIN_FRACTION * self.width;
-        // Written so that NaN (a disk gone astray) counts as stale too.
-        !(largest_displacement_sq < half * half)
+        // NaN (a disk gone astray) counts as stale too.
+        largest_displacement_sq.is_nan() || largest_displacement_sq >= half * half
     }
 
     /// The square of the largest distance a disk stored in `range` moved since the last
@@ -164,7 +164,8 @@ impl Skin {
         let built = self.x_built.iter().zip(&self.y_built);
         for (idx, ((&x, &y), (&x0, &y0))) in positions.zip(built).enumerate() {
             let (dx, dy) = domain.separation(x0, y0, x, y);
-            if !(dx * dx + dy * dy < half * half) {
+            let moved_sq = dx * dx + dy * dy;
+            if moved_sq.is_nan() || moved_sq >= half * half {
                 escapees.push(idx as u32);
             }
         }
