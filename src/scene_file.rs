@@ -746,7 +746,7 @@ impl Validator<'_> {
                 "enlarge the box, or use boundary = \"walls\"",
             ));
         }
-        let mut grid = StripGrid::new(&domain, particles.max_radius(), particles.len());
+        let mut grid = StripGrid::new(&domain, &particles);
         grid.build(&particles);
         let mut contacts = Vec::new();
         grid.find_contacts(&particles, &domain, &mut contacts);

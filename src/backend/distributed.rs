@@ -23,6 +23,7 @@ use crate::backend::{
 };
 use crate::sim::collision::{PairSide, collide_pair};
 use crate::sim::grid::{Contact, Entry, StripGrid, StripLayout, receive_band, refresh_band};
+use crate::sim::neighbours::{PairList, Skin};
 use crate::sim::observe::observe;
 use crate::sim::particles::PACKED_LEN;
 use crate::sim::schedule::ContactSchedule;
@@ -39,13 +40,10 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     // Every rank builds the same initial state from the seed and keeps its slab.
     let prepared = spec.prepare()?;
     let scene = &prepared.scene;
-    let layout = StripLayout::new(
-        &scene.domain,
-        scene.particles.max_radius(),
-        scene.particles.len(),
-    );
+    let skin = Skin::for_scene(&scene.domain, &scene.particles, prepared.params.dt);
+    let layout = StripLayout::with_skin(&scene.domain, &scene.particles, skin.width());
     let slabs = slabs(&layout, &scene.particles, comm.size())?;
-    let mut rank = RankState::new(comm, &prepared.scene, layout, &slabs);
+    let mut rank = RankState::new(comm, &prepared.scene, layout, &slabs, skin);
     let setup_s = setup_start.elapsed().as_secs_f64();
 
     let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, |_| {
@@ -178,7 +176,12 @@ struct RankState {
     particles: Particles,
     /// How many of `particles` are the rank's own (the rest are this step's ghosts).
     n_own: usize,
+    /// Strips tall enough for the neighbour list's skin.
     grid: StripGrid,
+    /// The skin and the own disks' positions at the last build of the list.
+    skin: Skin,
+    /// The pairs the slab's strips found (own disks, then ghosts) at the last build.
+    list: PairList,
     builds_since_reorder: u32,
     movers: Vec<Entry>,
     contacts: Vec<Contact>,
@@ -197,6 +200,7 @@ impl RankState {
         scene: &crate::sim::Scene,
         layout: StripLayout,
         slabs: &[Range<usize>],
+        skin: Skin,
     ) -> RankState {
         let me = comm.rank();
         let slab = slabs[me].clone();
@@ -233,6 +237,8 @@ impl RankState {
             n_own: particles.len(),
             particles,
             grid,
+            skin,
+            list: PairList::default(),
             builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
             movers: Vec::new(),
             contacts: Vec::new(),
@@ -255,15 +261,31 @@ impl RankState {
             );
             self.counters.wall_collisions += hits;
         });
-        let emigrants = timed(&mut stages.broad_phase, || self.refresh(comm.size()));
-        let immigrants = timed(&mut stages.communication, || comm.exchange(&emigrants));
-        timed(&mut stages.broad_phase, || {
-            self.migrate(comm.size(), &immigrants)
+        // Every rank rebuilds its list when any disk moved half the skin: the ghosts it
+        // lists are another rank's disks. Between builds disks stay with the rank that
+        // held them at the build, and the ghosts are the same disks, in the same order.
+        let moved_sq = timed(&mut stages.broad_phase, || self.largest_displacement_sq());
+        let moved_sq = timed(&mut stages.communication, || {
+            comm.all_gather(&[moved_sq])
+                .iter()
+                .flatten()
+                .fold(0.0, |a: f64, &b| if a >= b || a.is_nan() { a } else { b })
         });
+        let rebuild = self.skin.is_exceeded(moved_sq);
+        if rebuild {
+            let emigrants = timed(&mut stages.broad_phase, || self.refresh(comm.size()));
+            let immigrants = timed(&mut stages.communication, || comm.exchange(&emigrants));
+            timed(&mut stages.broad_phase, || {
+                self.migrate(comm.size(), &immigrants);
+                self.skin.record(&self.particles);
+            });
+        }
         let ghosts = timed(&mut stages.communication, || {
             comm.exchange(&self.halo(comm.size()))
         });
-        timed(&mut stages.broad_phase, || self.find_contacts(&ghosts));
+        timed(&mut stages.broad_phase, || {
+            self.find_contacts(&ghosts, rebuild)
+        });
         timed(&mut stages.collisions, || self.resolve_own_chains());
         let shared = timed(&mut stages.communication, || {
             comm.all_gather(&self.pack_shared())
@@ -272,6 +294,18 @@ impl RankState {
             self.resolve_shared_chains(&shared)
         });
         self.stages = stages;
+    }
+
+    /// The square of the largest distance an own disk moved since the last build
+    /// (infinite before the first).
+    fn largest_displacement_sq(&self) -> f64 {
+        if self.skin.is_built_for(&self.particles) {
+            let range = 0..self.particles.len();
+            self.skin
+                .largest_displacement_sq(range, &self.particles, &self.domain)
+        } else {
+            f64::INFINITY
+        }
     }
 
     /// Re-sorts the slab after the disks moved; returns, packed per destination rank,
@@ -349,25 +383,39 @@ impl RankState {
         outgoing
     }
 
-    /// Appends the ghosts after the own disks, finds the pairs the slab scans, and
-    /// splits them into chains of the rank's own and chains to share.
-    fn find_contacts(&mut self, ghosts: &[Vec<f64>]) {
+    /// Appends the ghosts after the own disks, rebuilds the list (with `rebuild`), finds
+    /// the listed pairs that overlap, and splits them into chains of the rank's own and
+    /// chains to share.
+    fn find_contacts(&mut self, ghosts: &[Vec<f64>], rebuild: bool) {
         let n_own = self.particles.len();
         self.n_own = n_own;
         if let Some(from) = self.ghosts_from {
             self.particles.unpack_append(&ghosts[from]);
-            self.grid
-                .set_ghosts(&self.particles, n_own..self.particles.len());
+        }
+        if rebuild {
+            if self.ghosts_from.is_some() {
+                self.grid
+                    .set_ghosts(&self.particles, n_own..self.particles.len());
+            }
+            let strips = self.grid.owned();
+            self.list.rebuild(
+                &self.grid,
+                strips,
+                &self.particles,
+                &self.domain,
+                &self.skin,
+            );
         }
         self.contacts.clear();
-        self.grid
+        self.list
             .find_contacts(&self.particles, &self.domain, &mut self.contacts);
         let (particles, layout, first) = (&self.particles, &self.layout, self.slab.start);
-        let exporting = self.export_to.is_some();
-        // Ghosts and exported disks are seen by another rank too: their chains are shared.
+        let (exporting, skin) = (self.export_to.is_some(), &self.skin);
+        // Ghosts and exported disks (those of the first strip at the build) are seen by
+        // another rank too: their chains are shared.
         let seen_elsewhere = |disk: u32| {
-            disk as usize >= n_own
-                || (exporting && layout.strip_of(particles.y[disk as usize]) == first)
+            let exported = || layout.strip_of(skin.built_position(disk as usize).1) == first;
+            disk as usize >= n_own || (exporting && exported())
         };
         self.shared.clear();
         self.schedule.split(
@@ -532,11 +580,7 @@ mod tests {
         let spec = spec(Boundary::Walls, 1.0, 0.05);
         let prepared = spec.prepare().unwrap();
         let particles = &prepared.scene.particles;
-        let layout = StripLayout::new(
-            &prepared.scene.domain,
-            particles.max_radius(),
-            particles.len(),
-        );
+        let layout = StripLayout::new(&prepared.scene.domain, particles);
         let error = slabs(&layout, particles, layout.n_strips + 1).unwrap_err();
         assert!(error.to_string().contains("use at most"), "{error}");
         let cut = slabs(&layout, particles, 3).unwrap();

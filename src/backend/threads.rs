@@ -24,6 +24,7 @@ use crate::sim::grid::{
     Contact, Entry, StripGrid, find_contacts_all_pairs_from, number_slots, receive_band,
     refresh_band,
 };
+use crate::sim::neighbours::{PairList, Skin};
 use crate::sim::observe::observe;
 use crate::sim::schedule::ContactSchedule;
 use crate::sim::step::{
@@ -95,7 +96,14 @@ pub struct ThreadedStepper {
     physics: Physics,
     params: StepParams,
     n_bands: usize,
+    /// Strips tall enough for the neighbour lists' skin.
     grid: StripGrid,
+    skin: Skin,
+    /// Per band of the last build: the candidate pairs its strips found.
+    lists: Vec<PairList>,
+    /// Per strip: whether it was the first strip of a band at the last build (with more
+    /// than one band). Only a disk there can be in two bands' lists.
+    first_of_band: Vec<bool>,
     builds_since_reorder: u32,
     /// Per band: disks that left its strips in the last refresh.
     movers: Vec<Vec<Entry>>,
@@ -119,12 +127,16 @@ impl ThreadedStepper {
         particles: &Particles,
         n_bands: usize,
     ) -> Self {
+        let skin = Skin::for_scene(&domain, particles, params.dt);
         ThreadedStepper {
             domain,
             physics,
             params,
             n_bands,
-            grid: StripGrid::new(&domain, particles.max_radius(), particles.len()),
+            grid: StripGrid::with_skin(&domain, particles, skin.width()),
+            skin,
+            lists: Vec::new(),
+            first_of_band: Vec::new(),
             builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
             movers: Vec::new(),
             contacts: Vec::new(),
@@ -183,31 +195,33 @@ impl ThreadedStepper {
         self.crossing.clear();
         match self.params.broadphase {
             Broadphase::Grid => {
-                let bands = self.build_grid(particles);
-                let n_bands = bands.len();
-                self.contacts.resize_with(n_bands, Vec::new);
-                self.handed_over.resize_with(n_bands, Vec::new);
-                self.schedules
-                    .resize_with(n_bands, ContactSchedule::default);
-                // A disk in a band's first strip may also be in the contacts of the band
-                // below (its north strip), or of the last band (periodic wrap).
-                let layout = *self.grid.layout();
-                let mut first_of_band = vec![false; layout.n_strips];
-                for band in bands.iter().filter(|_| n_bands > 1) {
-                    first_of_band[band.start] = true;
+                if self.lists_are_stale(particles) {
+                    self.rebuild_lists(particles);
                 }
-                let pinned = |disk: u32| first_of_band[layout.strip_of(particles.y[disk as usize])];
-                let (grid, domain, particles) = (&self.grid, &self.domain, &*particles);
-                bands
+                let n_lists = self.lists.len();
+                self.contacts.resize_with(n_lists, Vec::new);
+                self.handed_over.resize_with(n_lists, Vec::new);
+                self.schedules
+                    .resize_with(n_lists, ContactSchedule::default);
+                // A disk in a band's first strip at the build may also be in the list of
+                // the band below (its north strip), or of the last band (periodic wrap).
+                let layout = *self.grid.layout();
+                let (first_of_band, skin) = (&self.first_of_band, &self.skin);
+                let pinned = |disk: u32| {
+                    let (_, y_built) = skin.built_position(disk as usize);
+                    first_of_band[layout.strip_of(y_built)]
+                };
+                let (domain, particles) = (&self.domain, &*particles);
+                self.lists
                     .par_iter()
                     .zip(self.contacts.par_iter_mut())
                     .zip(self.handed_over.par_iter_mut())
                     .zip(self.schedules.par_iter_mut())
-                    .for_each(|(((band, contacts), handed_over), schedule)| {
+                    .for_each(|(((list, contacts), handed_over), schedule)| {
                         contacts.clear();
                         handed_over.clear();
-                        grid.find_contacts_in(band.clone(), particles, domain, contacts);
-                        // Split while the pairs are in scan order, close in memory.
+                        list.find_contacts(particles, domain, contacts);
+                        // Split while the pairs are in list order, close in memory.
                         schedule.split(particles.len(), contacts, handed_over, pinned);
                         contacts.sort_unstable_by_key(|contact| contact.key);
                     });
@@ -216,6 +230,45 @@ impl ThreadedStepper {
             }
             Broadphase::AllPairs => self.find_all_pairs(particles),
         }
+    }
+
+    /// True when a disk moved half the skin since the lists were built (the largest
+    /// displacement found in parallel chunks), or they were never built.
+    fn lists_are_stale(&self, particles: &Particles) -> bool {
+        if !self.skin.is_built_for(particles) {
+            return true;
+        }
+        let n = particles.len();
+        let chunk = n.div_ceil(4 * self.n_bands).max(MIN_CHUNK);
+        let (skin, domain) = (&self.skin, &self.domain);
+        let largest = (0..n.div_ceil(chunk))
+            .into_par_iter()
+            .map(|k| {
+                skin.largest_displacement_sq(k * chunk..n.min((k + 1) * chunk), particles, domain)
+            })
+            // NaN (a disk gone astray) wins, so that it counts as stale.
+            .reduce(|| 0.0, |a, b| if a >= b || a.is_nan() { a } else { b });
+        self.skin.is_exceeded(largest)
+    }
+
+    /// Rebuilds the grid and, band by band in parallel, the neighbour lists, and records
+    /// the positions they were built at.
+    fn rebuild_lists(&mut self, particles: &mut Particles) {
+        let bands = self.build_grid(particles);
+        self.first_of_band.clear();
+        self.first_of_band
+            .resize(self.grid.layout().n_strips, false);
+        for band in bands.iter().filter(|_| bands.len() > 1) {
+            self.first_of_band[band.start] = true;
+        }
+        self.lists.resize_with(bands.len(), PairList::default);
+        let (grid, domain, skin, particles_now) =
+            (&self.grid, &self.domain, &self.skin, &*particles);
+        self.lists
+            .par_iter_mut()
+            .zip(bands.par_iter())
+            .for_each(|(list, band)| list.rebuild(grid, band.clone(), particles_now, domain, skin));
+        self.skin.record(particles);
     }
 
     /// The grid build, band by band, and every [`REORDER_INTERVAL`] builds the disks

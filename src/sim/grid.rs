@@ -75,23 +75,42 @@ pub struct StripLayout {
     /// Largest contact distance, widened by a relative 1e-9 so that the window never
     /// rejects a pair the exact test (done with the shared arithmetic) would accept.
     reach: f64,
+    /// The radius of every disk, when all are equal (the scan then skips reading radii).
+    equal_radius: Option<f64>,
+    max_radius: f64,
 }
 
 impl StripLayout {
-    /// Strips at least one contact diameter (`2 · max_radius`) tall over the whole box.
+    /// Strips at least one contact diameter (`2 · max_radius`) tall over the whole box,
+    /// for `particles` (all the scene's disks).
     ///
     /// In sparse boxes there are no more strips than disks; a periodic box must be at
     /// least three contact diameters tall (`scene::check_periodic_box`), so it has at
     /// least three strips and no pair is found through two images.
-    pub fn new(domain: &Domain, max_radius: f64, n_particles: usize) -> StripLayout {
-        let contact = 2.0 * max_radius;
+    pub fn new(domain: &Domain, particles: &Particles) -> StripLayout {
+        StripLayout::with_skin(domain, particles, 0.0)
+    }
+
+    /// Strips at least `2 · max_radius + skin` tall, for pairs closer than their radii
+    /// plus `skin` (a neighbour list's candidates). A skin of 0 is [`StripLayout::new`].
+    pub fn with_skin(domain: &Domain, particles: &Particles, skin: f64) -> StripLayout {
+        let max_radius = particles.max_radius();
+        let contact = 2.0 * max_radius + skin;
+        let n_particles = particles.len();
         let n_strips = ((domain.height / contact).floor() as usize).clamp(1, n_particles.max(3));
         StripLayout {
             n_strips,
             inv_strip_height: n_strips as f64 / domain.height,
             width: domain.width,
             reach: contact * (1.0 + 1e-9),
+            equal_radius: (particles.min_radius() == max_radius).then_some(max_radius),
+            max_radius,
         }
+    }
+
+    /// True when every disk has the same radius.
+    pub fn has_equal_radii(&self) -> bool {
+        self.equal_radius.is_some()
     }
 
     /// The strip a disk at height `y` belongs to. Disks outside a walled box go to the
@@ -131,9 +150,14 @@ pub struct StripGrid {
 }
 
 impl StripGrid {
-    /// A grid over the whole box for disks no larger than `max_radius`.
-    pub fn new(domain: &Domain, max_radius: f64, n_particles: usize) -> StripGrid {
-        let layout = StripLayout::new(domain, max_radius, n_particles);
+    /// A grid over the whole box for `particles`.
+    pub fn new(domain: &Domain, particles: &Particles) -> StripGrid {
+        StripGrid::with_skin(domain, particles, 0.0)
+    }
+
+    /// A grid over the whole box whose strips also find pairs within `skin` of touching.
+    pub fn with_skin(domain: &Domain, particles: &Particles, skin: f64) -> StripGrid {
+        let layout = StripLayout::with_skin(domain, particles, skin);
         StripGrid::window(domain, layout, 0..layout.n_strips)
     }
 
@@ -318,27 +342,150 @@ impl StripGrid {
         domain: &Domain,
         contacts: &mut Vec<Contact>,
     ) {
-        let local = strips.start - self.first..strips.end - self.first;
-        match domain.boundary {
-            Boundary::Walls => self.scan::<false>(local, particles, domain, contacts),
-            Boundary::Periodic => self.scan::<true>(local, particles, domain, contacts),
-        }
+        let mut sink = ContactSink {
+            particles,
+            contacts,
+        };
+        self.scan_in(strips, domain, 0.0, &mut sink);
     }
 
-    fn scan<const PERIODIC: bool>(
+    /// Appends, as `[storage index, storage index]`, the pairs whose scanning disk lies
+    /// in `strips` (owned, global indices) and whose centres are closer than their radii
+    /// plus `skin`: the candidates of a neighbour list. The layout's strips must be at
+    /// least `2 · max_radius + skin` tall ([`StripLayout::with_skin`]).
+    pub fn find_pairs_in(
         &self,
-        local: Range<usize>,
+        strips: Range<usize>,
+        domain: &Domain,
+        skin: f64,
+        pairs: &mut Vec<[u32; 2]>,
+    ) {
+        debug_assert!(self.layout.reach >= skin);
+        self.scan_in(strips, domain, skin, &mut PairSink { pairs });
+    }
+
+    /// Appends every pair of a disk stored at one of `movers` and another disk that
+    /// overlap now, when no disk is further than `moved` from its position at the last
+    /// build (which the grid holds): a query around each mover of the strips and x
+    /// windows within `r_mover + max_radius + moved` of it. A pair may be appended
+    /// twice (by both its disks, or by this and a neighbour list): the caller sorts and
+    /// removes repeats. The overlap test is the scan's arithmetic.
+    pub fn find_contacts_of(
+        &self,
+        movers: &[u32],
+        moved: f64,
         particles: &Particles,
         domain: &Domain,
         contacts: &mut Vec<Contact>,
     ) {
-        let (reach, width) = (self.layout.reach, self.layout.width);
-        let test = |a: &Entry, b: &Entry, contacts: &mut Vec<Contact>| {
-            let (dx, dy) = domain.separation_in::<PERIODIC>(a.x, a.y, b.x, b.y);
-            let contact = a.radius + b.radius;
-            if dx * dx + dy * dy < contact * contact {
-                contacts.push(Contact::new(particles, a.idx as usize, b.idx as usize));
+        debug_assert!(
+            self.first == 0 && self.strips.len() == self.n_owned,
+            "a whole grid"
+        );
+        match domain.boundary {
+            Boundary::Walls => self.query::<false>(movers, moved, particles, domain, contacts),
+            Boundary::Periodic => self.query::<true>(movers, moved, particles, domain, contacts),
+        }
+    }
+
+    fn query<const PERIODIC: bool>(
+        &self,
+        movers: &[u32],
+        moved: f64,
+        particles: &Particles,
+        domain: &Domain,
+        contacts: &mut Vec<Contact>,
+    ) {
+        let (x, y, radius) = (&particles.x, &particles.y, &particles.radius);
+        let n_strips = self.layout.n_strips as i64;
+        let width = self.layout.width;
+        for &mover in movers {
+            let a = mover as usize;
+            let (xa, ya) = (x[a], y[a]);
+            let reach = (radius[a] + self.layout.max_radius + moved) * (1.0 + 1e-9);
+            let inv_height = self.layout.inv_strip_height;
+            let lowest = ((ya - reach) * inv_height).floor() as i64;
+            let highest = ((ya + reach) * inv_height).floor() as i64;
+            let strips = if PERIODIC {
+                // Every strip once, even when the window wraps all the way round.
+                (lowest..=highest.min(lowest + n_strips - 1))
+                    .map(|s| s.rem_euclid(n_strips) as usize)
+                    .collect::<Vec<_>>()
+            } else {
+                (lowest.clamp(0, n_strips - 1)..=highest.clamp(0, n_strips - 1))
+                    .map(|s| s as usize)
+                    .collect()
+            };
+            // x windows of build positions: one, or two where a periodic window wraps.
+            let mut windows = vec![(xa - reach, xa + reach)];
+            if PERIODIC && reach < 0.5 * width {
+                if xa - reach < 0.0 {
+                    windows.push((xa - reach + width, width));
+                } else if xa + reach > width {
+                    windows.push((0.0, xa + reach - width));
+                }
+            } else if PERIODIC {
+                windows = vec![(f64::NEG_INFINITY, f64::INFINITY)];
             }
+            for strip in strips {
+                let entries = &self.strips[strip][..];
+                for &(from, to) in &windows {
+                    let first = entries.partition_point(|b| b.x < from);
+                    for b in entries[first..].iter().take_while(|b| b.x < to) {
+                        let j = b.idx as usize;
+                        if j == a {
+                            continue;
+                        }
+                        let (dx, dy) = domain.separation_in::<PERIODIC>(xa, ya, x[j], y[j]);
+                        let contact = radius[a] + radius[j];
+                        if dx * dx + dy * dy < contact * contact {
+                            contacts.push(Contact::new(particles, a, j));
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    fn scan_in(&self, strips: Range<usize>, domain: &Domain, skin: f64, sink: &mut impl Sink) {
+        let local = strips.start - self.first..strips.end - self.first;
+        match (domain.boundary, self.layout.equal_radius.is_some()) {
+            (Boundary::Walls, true) => self.scan::<false, true>(local, domain, skin, sink),
+            (Boundary::Walls, false) => self.scan::<false, false>(local, domain, skin, sink),
+            (Boundary::Periodic, true) => self.scan::<true, true>(local, domain, skin, sink),
+            (Boundary::Periodic, false) => self.scan::<true, false>(local, domain, skin, sink),
+        }
+    }
+
+    /// Offers `sink` every pair whose scanning disk lies in the local strips `local`
+    /// (each pair once), with whether their centres are closer than their radii plus
+    /// `skin`. Windows in x: a disk's own strip from the next disk on, and the strip
+    /// above, both within `reach` of it.
+    ///
+    /// Most windows hold a few disks: the first [`OWN_WINDOW`] and [`NORTH_WINDOW`]
+    /// candidates are tested whatever their count (a candidate outside the window
+    /// fails the window test, not a loop exit: no mispredicted branch per disk), and a
+    /// loop continues only the rare window that reaches further.
+    fn scan<const PERIODIC: bool, const EQUAL_RADII: bool>(
+        &self,
+        local: Range<usize>,
+        domain: &Domain,
+        skin: f64,
+        sink: &mut impl Sink,
+    ) {
+        let (reach, width) = (self.layout.reach, self.layout.width);
+        // With a skin of 0, `a.radius + b.radius + skin` is the contact distance itself:
+        // adding 0.0 to a positive number is exact. With equal radii it is one number.
+        let equal_radius = self.layout.equal_radius.unwrap_or(0.0);
+        let equal_limit = equal_radius + equal_radius + skin;
+        let within = |a: &Entry, b: &Entry| {
+            let (dx, dy) = domain.separation_in::<PERIODIC>(a.x, a.y, b.x, b.y);
+            let limit = if EQUAL_RADII {
+                equal_limit
+            } else {
+                a.radius + b.radius + skin
+            };
+            dx * dx + dy * dy < limit * limit
         };
         let no_entries: &[Entry] = &[];
         for strip in local {
@@ -354,11 +501,25 @@ impl StripGrid {
             let mut north_first = 0;
             for (pos, a) in own_entries.iter().enumerate() {
                 // Own strip: the disks to the right within reach.
-                for b in own_entries[pos + 1..]
-                    .iter()
-                    .take_while(|b| b.x - a.x < reach)
-                {
-                    test(a, b, contacts);
+                let right = |b: &Entry| b.x - a.x < reach;
+                let own = &own_entries[pos + 1..];
+                sink.prepare(OWN_WINDOW + NORTH_WINDOW);
+                let rest = match own.split_first_chunk::<OWN_WINDOW>() {
+                    Some((window, rest)) => {
+                        for b in window {
+                            sink.offer(right(b) & within(a, b), a, b);
+                        }
+                        if right(&window[OWN_WINDOW - 1]) {
+                            rest
+                        } else {
+                            no_entries
+                        }
+                    }
+                    None => own,
+                };
+                for b in rest.iter().take_while(|b| right(b)) {
+                    sink.prepare(1);
+                    sink.offer(within(a, b), a, b);
                 }
                 // North strip: the disks within reach on either side.
                 while north_first < north_entries.len()
@@ -366,11 +527,24 @@ impl StripGrid {
                 {
                     north_first += 1;
                 }
-                for b in north_entries[north_first..]
-                    .iter()
-                    .take_while(|b| b.x < a.x + reach)
-                {
-                    test(a, b, contacts);
+                let left = |b: &Entry| b.x < a.x + reach;
+                let north = &north_entries[north_first..];
+                let rest = match north.split_first_chunk::<NORTH_WINDOW>() {
+                    Some((window, rest)) => {
+                        for b in window {
+                            sink.offer(left(b) & within(a, b), a, b);
+                        }
+                        if left(&window[NORTH_WINDOW - 1]) {
+                            rest
+                        } else {
+                            no_entries
+                        }
+                    }
+                    None => north,
+                };
+                for b in rest.iter().take_while(|b| left(b)) {
+                    sink.prepare(1);
+                    sink.offer(within(a, b), a, b);
                 }
                 if PERIODIC {
                     // The same windows seen through the periodic image in x.
@@ -379,13 +553,15 @@ impl StripGrid {
                             .iter()
                             .take_while(|b| b.x + width - a.x < reach)
                         {
-                            test(a, b, contacts);
+                            sink.prepare(1);
+                            sink.offer(within(a, b), a, b);
                         }
                         for b in north_entries
                             .iter()
                             .take_while(|b| b.x + width < a.x + reach)
                         {
-                            test(a, b, contacts);
+                            sink.prepare(1);
+                            sink.offer(within(a, b), a, b);
                         }
                     }
                     if a.x - reach < 0.0 {
@@ -394,11 +570,71 @@ impl StripGrid {
                             .rev()
                             .take_while(|b| b.x - width > a.x - reach)
                         {
-                            test(a, b, contacts);
+                            sink.prepare(1);
+                            sink.offer(within(a, b), a, b);
                         }
                     }
                 }
             }
+        }
+    }
+}
+
+/// Candidates of a disk's own strip tested without a loop exit ([`StripGrid::scan`]).
+const OWN_WINDOW: usize = 2;
+/// Candidates of the strip above tested without a loop exit ([`StripGrid::scan`]).
+const NORTH_WINDOW: usize = 4;
+
+/// Where the scan's candidate pairs go: `offer` is called for every candidate, with
+/// whether it passed the test.
+trait Sink {
+    /// Called before the candidates of one disk, at most `n_candidates` of them without
+    /// another call.
+    fn prepare(&mut self, n_candidates: usize);
+    fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry);
+}
+
+/// Overlapping pairs as [`Contact`]s. Few candidates overlap: the branch is predictable.
+struct ContactSink<'a> {
+    particles: &'a Particles,
+    contacts: &'a mut Vec<Contact>,
+}
+
+impl Sink for ContactSink<'_> {
+    #[inline(always)]
+    fn prepare(&mut self, _: usize) {}
+
+    #[inline(always)]
+    fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry) {
+        if accepted {
+            let contact = Contact::new(self.particles, a.idx as usize, b.idx as usize);
+            self.contacts.push(contact);
+        }
+    }
+}
+
+/// Candidate pairs of a neighbour list, as storage indices. A good share of candidates
+/// pass: every candidate is written, and the length grows only by those that passed,
+/// so there is no branch to mispredict.
+struct PairSink<'a> {
+    pairs: &'a mut Vec<[u32; 2]>,
+}
+
+impl Sink for PairSink<'_> {
+    #[inline(always)]
+    fn prepare(&mut self, n_candidates: usize) {
+        self.pairs.reserve(n_candidates);
+    }
+
+    #[inline(always)]
+    fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry) {
+        let len = self.pairs.len();
+        debug_assert!(len < self.pairs.capacity());
+        // SAFETY: `prepare` left room for every candidate of this disk, so there is room
+        // at `len`; the length grows over it only when it was written.
+        unsafe {
+            self.pairs.as_mut_ptr().add(len).write([a.idx, b.idx]);
+            self.pairs.set_len(len + usize::from(accepted));
         }
     }
 }

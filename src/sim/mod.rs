@@ -9,6 +9,7 @@ pub mod collision;
 pub mod engine;
 pub mod event;
 pub mod grid;
+pub mod neighbours;
 pub mod observe;
 pub mod particles;
 pub mod pilot;

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use super::collision::{ContactOutcome, resolve_contact};
 use super::grid::{Contact, StripGrid, find_contacts_all_pairs};
+use super::neighbours::{PairList, Skin};
 use super::particles::{DiskSlices, Particles};
 use super::scene::{Boundary, Domain, Physics, Scene, wrap_periodic};
 
@@ -68,7 +69,12 @@ pub struct Stepper {
     domain: Domain,
     physics: Physics,
     params: StepParams,
+    /// Strips tall enough for the neighbour list's skin.
     grid: StripGrid,
+    skin: Skin,
+    neighbours: PairList,
+    /// Disks that moved half the skin since the list was built (this step's).
+    pub(crate) escapees: Vec<u32>,
     /// Grid builds since the disks were last stored in sorted order.
     builds_since_reorder: u32,
     contacts: Vec<Contact>,
@@ -82,11 +88,15 @@ impl Stepper {
         params: StepParams,
         particles: &Particles,
     ) -> Self {
+        let skin = Skin::for_scene(&domain, particles, params.dt);
         Stepper {
             domain,
             physics,
             params,
-            grid: StripGrid::new(&domain, particles.max_radius(), particles.len()),
+            grid: StripGrid::with_skin(&domain, particles, skin.width()),
+            skin,
+            neighbours: PairList::default(),
+            escapees: Vec::new(),
             builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
             contacts: Vec::new(),
             counters: StepCounters::default(),
@@ -100,6 +110,11 @@ impl Stepper {
 
     pub fn counters(&self) -> StepCounters {
         self.counters
+    }
+
+    /// The pairs the last [`Stepper::find_contacts`] found, in canonical order.
+    pub fn contacts(&self) -> &[Contact] {
+        &self.contacts
     }
 
     /// One full step: move, apply the boundary, find overlaps, resolve them.
@@ -125,25 +140,70 @@ impl Stepper {
     pub fn find_contacts(&mut self, particles: &mut Particles) {
         self.contacts.clear();
         match self.params.broadphase {
-            Broadphase::Grid => {
-                self.grid.build(particles);
-                self.builds_since_reorder += 1;
-                if self.builds_since_reorder >= REORDER_INTERVAL {
-                    // Storing disks in grid order keeps the next builds' reads sequential.
-                    // Results do not change: pair order and sums go by id, not storage.
-                    particles.reorder(&self.grid.sorted_indices());
-                    self.grid.storage_now_sorted();
-                    self.builds_since_reorder = 0;
-                }
-                self.grid
-                    .find_contacts(particles, &self.domain, &mut self.contacts);
-            }
+            Broadphase::Grid => self.find_contacts_listed(particles),
             Broadphase::AllPairs => {
                 find_contacts_all_pairs(particles, &self.domain, &mut self.contacts);
             }
         }
         // Canonical order: the result of resolution must not depend on how pairs were found.
         self.contacts.sort_unstable_by_key(|contact| contact.key);
+        // A pair of an escapee may have been found twice (see `find_contacts_listed`).
+        self.contacts.dedup_by_key(|contact| contact.key);
+    }
+
+    /// The overlapping pairs from the neighbour list, rebuilt when it is stale. Disks
+    /// that escaped it (moved half the skin), while few, have their pairs found by
+    /// queries of the grid instead of a rebuild.
+    fn find_contacts_listed(&mut self, particles: &mut Particles) {
+        let domain = &self.domain.clone();
+        let largest_sq = if self.skin.is_built_for(particles) {
+            self.skin
+                .largest_displacement_sq(0..particles.len(), particles, domain)
+        } else {
+            f64::INFINITY
+        };
+        self.escapees.clear();
+        if self.skin.is_exceeded(largest_sq) {
+            if largest_sq <= self.skin.width() * self.skin.width() {
+                self.skin.escapees(particles, domain, &mut self.escapees);
+            }
+            if !self
+                .skin
+                .may_patch(self.escapees.len(), particles.len(), largest_sq)
+            {
+                self.escapees.clear();
+                self.rebuild_list(particles);
+            }
+        }
+        self.neighbours
+            .find_contacts(particles, domain, &mut self.contacts);
+        if !self.escapees.is_empty() {
+            self.grid.find_contacts_of(
+                &self.escapees,
+                largest_sq.sqrt(),
+                particles,
+                domain,
+                &mut self.contacts,
+            );
+        }
+    }
+
+    /// Re-sorts the grid (every [`REORDER_INTERVAL`] builds, the disks too) and rebuilds
+    /// the neighbour list at the disks' positions.
+    fn rebuild_list(&mut self, particles: &mut Particles) {
+        self.grid.build(particles);
+        self.builds_since_reorder += 1;
+        if self.builds_since_reorder >= REORDER_INTERVAL {
+            // Storing disks in grid order keeps the next builds' reads sequential.
+            // Results do not change: pair order and sums go by id, not storage.
+            particles.reorder(&self.grid.sorted_indices());
+            self.grid.storage_now_sorted();
+            self.builds_since_reorder = 0;
+        }
+        let strips = self.grid.owned();
+        self.neighbours
+            .rebuild(&self.grid, strips, particles, &self.domain, &self.skin);
+        self.skin.record(particles);
     }
 
     /// Applies the impulse law to each found pair, in canonical order.
@@ -298,13 +358,37 @@ fn reflect_at_walls(
     length: f64,
     wall_restitution: f64,
 ) -> u64 {
-    let mut hits = 0;
-    for ((&p, v), &r) in positions.iter().zip(velocities).zip(radii) {
+    let reflect = |p: f64, v: &mut f64, r: f64| {
         let outward = (p - r < 0.0 && *v < 0.0) || (p + r > length && *v > 0.0);
         if outward {
             *v *= -wall_restitution;
-            hits += 1;
         }
+        u64::from(outward)
+    };
+    // Few disks touch a wall in any step: a branch-free test of four disks at a time
+    // (it vectorises) finds the groups with one near a wall, and only those are looked
+    // at one by one. The branch is almost never taken, so it is well predicted.
+    let mut hits = 0;
+    let mut positions4 = positions.chunks_exact(4);
+    let mut velocities4 = velocities.chunks_exact_mut(4);
+    let mut radii4 = radii.chunks_exact(4);
+    for ((p, v), r) in (&mut positions4).zip(&mut velocities4).zip(&mut radii4) {
+        let mut near = false;
+        for lane in 0..4 {
+            near |= (p[lane] - r[lane] < 0.0) | (p[lane] + r[lane] > length);
+        }
+        if near {
+            for lane in 0..4 {
+                hits += reflect(p[lane], &mut v[lane], r[lane]);
+            }
+        }
+    }
+    let rest = positions4
+        .remainder()
+        .iter()
+        .zip(velocities4.into_remainder());
+    for ((&p, v), &r) in rest.zip(radii4.remainder()) {
+        hits += reflect(p, v, r);
     }
     hits
 }
