@@ -314,7 +314,7 @@ pub fn summarize(
         oversubscribed: workers.threads * workers.ranks > cores,
         boundary: prepared.scene.domain.boundary.name().to_owned(),
         broadphase: prepared.params.broadphase.name().to_owned(),
-        packing: prepared.scene.packing(),
+        packing: prepared.initial.packing,
         seed: prepared.seed,
         wall_s,
         cpu_s: measured.cpu_s,
@@ -364,8 +364,8 @@ pub fn summarize(
         tc: is_event.then_some(prepared.event.tc),
         temperature_curve: accuracy.temperature_curve.clone().filter(|_| !elastic),
         rms_step_over_radius: {
-            let step = scene.particles.rms_speed() * prepared.params.dt;
-            (step > 0.0).then(|| step / scene.particles.min_radius())
+            let step = prepared.initial.rms_speed * prepared.params.dt;
+            (step > 0.0).then(|| step / prepared.initial.min_radius)
         },
         choice: prepared.choice.clone(),
     }

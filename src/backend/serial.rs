@@ -19,14 +19,16 @@ use crate::spec::{Method, Observe, PreparedRun, RunSpec};
 /// and left out of `wall_s`.
 pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
     let setup_start = Instant::now();
-    let prepared = spec.prepare()?;
-    let mut particles = prepared.scene.particles.clone();
+    let mut prepared = spec.prepare()?;
+    let mut particles = prepared.take_particles();
     let initial = observe(&particles);
     let mut curve = Curve::new(&particles);
     let mut stages = StageSeconds::default();
     let (setup_s, seconds, counters, mut accuracy) = match prepared.method {
         Method::Step => {
-            let mut stepper = Stepper::for_scene(&prepared.scene, prepared.params);
+            let scene = &prepared.scene;
+            let mut stepper =
+                Stepper::new(scene.domain, scene.physics, prepared.params, &particles);
             let setup_s = setup_start.elapsed().as_secs_f64();
             let mut missed =
                 (prepared.observe == Observe::Accuracy).then(MissedCollisions::default);

@@ -47,8 +47,8 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
             threads: threads.get(),
             source,
         })?;
-    let prepared = spec.prepare()?;
-    let mut particles = prepared.scene.particles.clone();
+    let mut prepared = spec.prepare()?;
+    let mut particles = prepared.take_particles();
     let scene = &prepared.scene;
     let mut stepper = ThreadedStepper::new(
         scene.domain,
