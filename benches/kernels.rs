@@ -1,6 +1,8 @@
 //! Criterion benches of the simulator's kernels: one full serial step (and, as a
-//! yardstick, one step of a skilled cell-list code: `yardstick/mod.rs`), the broad phase
-//! (grid build and pair search) and the contact resolution at N = 100,000; one full step
+//! yardstick, one step of a skilled cell-list code: `yardstick/mod.rs`) at N = 100,000
+//! (the stages of a step are not benched apart: the neighbour lists make a step's broad
+//! phase depend on the steps before it; `collide simulate` reports each stage's time
+//! over a run); one full step
 //! of the serial and the rayon (2 threads) backends and of the yardstick at N = 1,000,000;
 //! and one step of the distributed backend on 2 ranks as threads (`ThreadComm`) at
 //! N = 100,000, through the same stepping loop (`backend::step_loop`) that
@@ -10,7 +12,7 @@
 //! in the `event` group it is collisions (pair and wall) per second of the event-driven
 //! method. The `step` and `event` groups run both methods on the same periodic gases at
 //! N = 10^4, 10^5 and 10^6: they are the cost model of `method = "auto"`.
-//! Run: `cargo bench --bench kernels` (MPI runs need `mpirun`: see the README's Speed section).
+//! Run: `cargo bench --bench kernels` (MPI runs need `mpirun`: see `docs/performance.md`).
 //! Before it is timed, the yardstick is checked against our step: same energy (elastic
 //! gas) and the same number of pair impulses, to 0.5%, after the same 50 steps.
 //! `COLLIDE_YARDSTICK_ONLY=1 cargo bench --bench kernels` prints only the yardstick's rate
@@ -114,14 +116,6 @@ fn serial_kernels(c: &mut Criterion) {
         });
         group.bench_function(BenchmarkId::new(YARDSTICK, packing), |b| {
             b.iter(|| yardstick.step());
-        });
-        group.bench_function(BenchmarkId::new("broad_phase", packing), |b| {
-            b.iter(|| stepper.find_contacts(&mut particles));
-        });
-        // Resolving the same contacts again finds them separating: this times the
-        // canonical-order pass itself, not the impulses of fresh collisions.
-        group.bench_function(BenchmarkId::new("resolve_contacts", packing), |b| {
-            b.iter(|| stepper.resolve_contacts(&mut particles));
         });
     }
     group.finish();
