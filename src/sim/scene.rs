@@ -564,7 +564,123 @@ fn maxwellian_velocities(
 
 #[cfg(test)]
 mod tests {
-    use super::wrap_periodic;
+    use xxhash_rust::xxh3::Xxh3;
+
+    use super::*;
+
+    /// Hex xxh3-64 of every array of the built disks (ids, positions, velocities, radii,
+    /// masses) in storage order, and of the box: equal hashes mean the same scene bit for bit.
+    fn scene_hash(gas: &GasSpec) -> String {
+        let scene = gas.build().expect("the gas places");
+        let particles = &scene.particles;
+        let mut hasher = Xxh3::new();
+        for &id in &particles.id {
+            hasher.update(&id.to_le_bytes());
+        }
+        let p = particles;
+        for values in [&p.x, &p.y, &p.vx, &p.vy, &p.radius, &p.mass] {
+            for value in values {
+                hasher.update(&value.to_le_bytes());
+            }
+        }
+        for value in [scene.domain.width, scene.domain.height] {
+            hasher.update(&value.to_le_bytes());
+        }
+        format!("{:016x}", hasher.digest())
+    }
+
+    /// The placed scene is part of every recorded run (its `state_hash`, the CI baseline,
+    /// the shipped results): building it faster must not change a bit. These hashes were
+    /// recorded with the first, straightforward placement.
+    #[test]
+    fn placement_gives_the_recorded_scenes_bit_for_bit() {
+        let uniform = RadiusDistribution::Uniform { min: 0.5, max: 1.5 };
+        let cases = [
+            (
+                "walls, fixed r, packing 0.05",
+                GasSpec::unit(1000, 0.05),
+                "07c04ced0ba38b3c",
+            ),
+            (
+                "walls, fixed r, packing 0.3",
+                GasSpec::unit(20_000, 0.3),
+                "c2bcea67c4a69616",
+            ),
+            (
+                "periodic, fixed r, packing 0.3",
+                GasSpec {
+                    boundary: Boundary::Periodic,
+                    seed: 7,
+                    ..GasSpec::unit(10_000, 0.3)
+                },
+                "c1fd7ae01e149fad",
+            ),
+            (
+                "walls, fixed r, packing 0.5 (near jamming)",
+                GasSpec {
+                    seed: 3,
+                    ..GasSpec::unit(2000, 0.5)
+                },
+                "6fc5038adae5a01b",
+            ),
+            (
+                "walls, lattice, packing 0.5",
+                GasSpec {
+                    placement: Placement::Lattice,
+                    ..GasSpec::unit(10_000, 0.5)
+                },
+                "533d686477129f0a",
+            ),
+            (
+                "walls, uniform r, mass by area, packing 0.3",
+                GasSpec {
+                    radius: uniform,
+                    mass: MassRule::Area,
+                    seed: 11,
+                    ..GasSpec::unit(5000, 0.3)
+                },
+                "91ec5649f3dead32",
+            ),
+            (
+                "periodic, uniform r, packing 0.05",
+                GasSpec {
+                    radius: uniform,
+                    boundary: Boundary::Periodic,
+                    seed: 5,
+                    ..GasSpec::unit(5000, 0.05)
+                },
+                "9b472947163f9089",
+            ),
+            (
+                "periodic, fewer cells than the 3x3 block",
+                GasSpec {
+                    boundary: Boundary::Periodic,
+                    ..GasSpec::unit(5, 0.05)
+                },
+                "d956c3dda4592449",
+            ),
+            (
+                "walls, a wide explicit box",
+                GasSpec {
+                    extent: Extent::Size {
+                        width: 400.0,
+                        height: 9.0,
+                    },
+                    speed_rms: 2.5,
+                    ..GasSpec::unit(300, 0.0)
+                },
+                "05dff41a6f878bfc",
+            ),
+        ];
+        let mut failures = Vec::new();
+        for (name, gas, recorded) in cases {
+            let hash = scene_hash(&gas);
+            if hash != recorded {
+                failures.push(format!("{name}: built {hash}, recorded {recorded}"));
+            }
+        }
+        assert!(failures.is_empty(), "{}", failures.join("\n"));
+    }
 
     #[test]
     fn periodic_wrap_lands_in_the_box_from_either_side_and_any_distance() {
