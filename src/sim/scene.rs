@@ -8,7 +8,7 @@ use rand_distr::StandardNormal;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::{Deserialize, Serialize};
 
-use super::particles::{Disk, Particles};
+use super::particles::Particles;
 
 /// Random sequential addition of equal disks jams near this area fraction in 2D.
 pub const RSA_JAMMING_PACKING: f64 = 0.547;
@@ -293,15 +293,22 @@ impl GasSpec {
     }
 
     /// Draws radii, positions and velocities from the seed.
+    ///
+    /// Set-up holds at most as much as the finished [`Particles`] plus small scratch:
+    /// disks are placed into placement-order arrays, and each array moves into storage
+    /// order in turn.
     pub fn build(&self) -> Result<Scene, PlacementError> {
+        let n_particles = self.n_particles;
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(self.seed);
-        let radii: Vec<f64> = (0..self.n_particles)
-            .map(|_| match self.radius {
-                RadiusDistribution::Fixed(r) => r,
-                RadiusDistribution::Uniform { min, max } => rng.random_range(min..=max),
-            })
-            .collect();
-        let disk_area: f64 = radii.iter().map(|r| std::f64::consts::PI * r * r).sum();
+        let radii = match self.radius {
+            RadiusDistribution::Fixed(r) => Radii::Fixed(r),
+            RadiusDistribution::Uniform { min, max } => Radii::Drawn(
+                (0..n_particles)
+                    .map(|_| rng.random_range(min..=max))
+                    .collect(),
+            ),
+        };
+        let disk_area = radii.area_of_first(n_particles);
         let (width, height) = match self.extent {
             Extent::Packing(packing) => {
                 let side = (disk_area / packing).sqrt();
@@ -314,7 +321,9 @@ impl GasSpec {
             height,
             boundary: self.boundary,
         };
-        let max_radius = radii.iter().copied().fold(0.0, f64::max);
+        let max_radius = (0..n_particles)
+            .map(|idx| radii.of(idx))
+            .fold(0.0, f64::max);
         check_periodic_box(&domain, max_radius)?;
         let positions = match self.placement {
             Placement::Random => {
@@ -322,42 +331,131 @@ impl GasSpec {
                 if packing > RSA_JAMMING_PACKING {
                     return Err(PlacementError::BeyondJamming { packing });
                 }
-                place_random(&domain, &radii, &mut rng)?
+                place_random(&domain, &radii, n_particles, &mut rng)?
             }
-            Placement::Lattice => place_lattice(&domain, self.n_particles, max_radius)?,
+            Placement::Lattice => place_lattice(&domain, n_particles, max_radius)?,
         };
-        let masses: Vec<f64> = radii
-            .iter()
-            .map(|&r| match self.mass {
-                MassRule::Fixed(m) => m,
-                MassRule::Area => std::f64::consts::PI * r * r,
-            })
-            .collect();
-        let velocities = maxwellian_velocities(&masses, self.speed_rms, &mut rng);
-        let mut disks: Vec<Disk> = (0..self.n_particles)
-            .map(|i| Disk {
-                x: positions[i].0,
-                y: positions[i].1,
-                vx: velocities[i].0,
-                vy: velocities[i].1,
-                radius: radii[i],
-                mass: masses[i],
-            })
-            .collect();
         // Ids in row order (rows one contact diameter tall, then x): canonical pair order
         // goes by id, so numbering neighbours close together keeps every pass over the
         // contacts close in memory. Placement order is random in space.
-        let row_height = 2.0 * max_radius;
-        disks.sort_by(|a, b| {
-            let (row_a, row_b) = ((a.y / row_height).floor(), (b.y / row_height).floor());
-            row_a.total_cmp(&row_b).then(a.x.total_cmp(&b.x))
-        });
+        let order = row_order(&positions, 2.0 * max_radius);
+        let x = gather(&order, |idx| positions[idx][0]);
+        let y = gather(&order, |idx| positions[idx][1]);
+        drop(positions);
+        let mass_of = |radius: f64| match self.mass {
+            MassRule::Fixed(m) => m,
+            MassRule::Area => std::f64::consts::PI * radius * radius,
+        };
+        let (vx, vy) = maxwellian_velocities(
+            n_particles,
+            |idx| mass_of(radii.of(idx)),
+            self.speed_rms,
+            &mut rng,
+        );
+        let vx = gather(&order, |idx| vx[idx]);
+        let vy = gather(&order, |idx| vy[idx]);
+        let radius = gather(&order, |idx| radii.of(idx));
+        drop((order, radii));
+        let mass = radius.iter().map(|&r| mass_of(r)).collect();
         Ok(Scene {
             domain,
             physics: self.physics,
-            particles: Particles::from_disks(&disks),
+            particles: Particles {
+                id: (0..n_particles as u32).collect(),
+                x,
+                y,
+                vx,
+                vy,
+                radius,
+                mass,
+            },
         })
     }
+}
+
+/// The radii in placement order: one value for equal disks, else one per disk.
+enum Radii {
+    Fixed(f64),
+    Drawn(Vec<f64>),
+}
+
+impl Radii {
+    #[inline(always)]
+    fn of(&self, idx: usize) -> f64 {
+        match self {
+            Radii::Fixed(r) => *r,
+            Radii::Drawn(radii) => radii[idx],
+        }
+    }
+
+    /// Total area of the first `n_disks` disks, summed in placement order.
+    fn area_of_first(&self, n_disks: usize) -> f64 {
+        (0..n_disks)
+            .map(|idx| {
+                let r = self.of(idx);
+                std::f64::consts::PI * r * r
+            })
+            .sum()
+    }
+}
+
+/// `values(order[k])` for every k: an array moved from placement order into storage order.
+fn gather(order: &[u32], values: impl Fn(usize) -> f64) -> Vec<f64> {
+    order.iter().map(|&idx| values(idx as usize)).collect()
+}
+
+/// Placement indices in storage order: by row of height `row_height` (counted from
+/// y = 0), then by x, then by placement index, the order of a stable sort on
+/// (row, x) with `f64::total_cmp`. A counting sort into row buckets (at most one per
+/// disk) and a sort of each bucket on integer keys keep it O(N) for a gas of N disks.
+fn row_order(positions: &[[f64; 2]], row_height: f64) -> Vec<u32> {
+    let row_of = |position: &[f64; 2]| (position[1] / row_height).floor();
+    let max_row = positions.iter().map(row_of).fold(0.0, f64::max);
+    // Rows ascend with y, and buckets with rows (the map below never decreases), so
+    // sorting each bucket sorts the whole.
+    let n_buckets = (positions.len() as f64).min(max_row + 1.0).max(1.0);
+    let bucket_of = |position: &[f64; 2]| {
+        ((row_of(position) / (max_row + 1.0) * n_buckets) as usize).min(n_buckets as usize - 1)
+    };
+    let mut starts = vec![0u32; n_buckets as usize + 1];
+    for position in positions {
+        starts[bucket_of(position) + 1] += 1;
+    }
+    for bucket in 1..starts.len() {
+        starts[bucket] += starts[bucket - 1];
+    }
+    let mut order = vec![0u32; positions.len()];
+    let mut next_slot = starts.clone();
+    for (idx, position) in positions.iter().enumerate() {
+        let slot = &mut next_slot[bucket_of(position)];
+        order[*slot as usize] = idx as u32;
+        *slot += 1;
+    }
+    let mut keys = Vec::new();
+    for bucket in starts.windows(2) {
+        let members = &mut order[bucket[0] as usize..bucket[1] as usize];
+        keys.clear();
+        keys.extend(members.iter().map(|&idx| {
+            let position = &positions[idx as usize];
+            (
+                total_order_key(row_of(position)),
+                total_order_key(position[0]),
+                idx,
+            )
+        }));
+        // Keys are unique (the placement index is last), so an unstable sort is stable here.
+        keys.sort_unstable();
+        for (member, key) in members.iter_mut().zip(&keys) {
+            *member = key.2;
+        }
+    }
+    order
+}
+
+/// An integer that orders like `f64::total_cmp` (the same bit trick).
+fn total_order_key(value: f64) -> i64 {
+    let bits = value.to_bits() as i64;
+    bits ^ (((bits >> 63) as u64) >> 1) as i64
 }
 
 /// Periodic boxes need three cells of one contact diameter each way: the cell list
@@ -376,84 +474,213 @@ pub fn check_periodic_box(domain: &Domain, max_radius: f64) -> Result<(), Placem
     Ok(())
 }
 
-/// Random sequential addition with a linked-cell occupancy grid (O(1) per try).
+/// One cell of the placement grid. The first disk placed in a cell is stored inline, so
+/// a try reads its 3×3 block of cells from three short runs of memory that can be
+/// fetched ahead; further disks of the cell (cells hold about one disk) are listed
+/// through `more`.
+#[derive(Clone, Copy)]
+#[repr(align(32))]
+struct PlacementCell {
+    x: f64,
+    y: f64,
+    /// NaN while the cell is empty: a NaN contact distance overlaps nothing.
+    radius: f64,
+    /// First further disk of the cell (a placement index), or [`NO_DISK`].
+    more: u32,
+}
+
+const NO_DISK: u32 = u32::MAX;
+
+const EMPTY_CELL: PlacementCell = PlacementCell {
+    x: 0.0,
+    y: 0.0,
+    radius: f64::NAN,
+    more: NO_DISK,
+};
+
+/// Tries whose cells are fetched ahead of the try that reads them.
+const PREFETCH_TRIES_AHEAD: usize = 8;
+
+/// The uniform grid of [`place_random`] and the disks placed so far.
+struct PlacementGrid {
+    cells: Vec<PlacementCell>,
+    /// Next further disk of the same cell, by placement index.
+    more: Vec<u32>,
+    /// Positions by placement index.
+    positions: Vec<[f64; 2]>,
+    n_cols: usize,
+    n_rows: usize,
+    cell_w: f64,
+    cell_h: f64,
+    periodic: bool,
+}
+
+impl PlacementGrid {
+    fn new(domain: &Domain, max_radius: f64, n_particles: usize) -> PlacementGrid {
+        // At least one contact diameter; wider in sparse boxes, so the grid never has
+        // more cells than disks.
+        let cell = (2.0 * max_radius).max((domain.area() / n_particles as f64).sqrt());
+        let n_cols = ((domain.width / cell).floor() as usize).max(1);
+        let n_rows = ((domain.height / cell).floor() as usize).max(1);
+        PlacementGrid {
+            cells: vec![EMPTY_CELL; n_cols * n_rows],
+            more: Vec::with_capacity(n_particles),
+            positions: Vec::with_capacity(n_particles),
+            n_cols,
+            n_rows,
+            cell_w: domain.width / n_cols as f64,
+            cell_h: domain.height / n_rows as f64,
+            periodic: domain.boundary == Boundary::Periodic,
+        }
+    }
+
+    fn cell_of(&self, x: f64, y: f64) -> (usize, usize) {
+        (
+            ((x / self.cell_w) as usize).min(self.n_cols - 1),
+            ((y / self.cell_h) as usize).min(self.n_rows - 1),
+        )
+    }
+
+    /// Asks the memory system for the 3×3 block of cells around (x, y). A hint only:
+    /// edges are clamped rather than wrapped.
+    fn prefetch_block(&self, x: f64, y: f64) {
+        let (cx, cy) = self.cell_of(x, y);
+        let (col_lo, col_hi) = (cx.saturating_sub(1), (cx + 1).min(self.n_cols - 1));
+        for row in cy.saturating_sub(1)..=(cy + 1).min(self.n_rows - 1) {
+            for col in [col_lo, cx, col_hi] {
+                prefetch(&self.cells[row * self.n_cols + col]);
+            }
+        }
+    }
+
+    /// Whether a disk of radius `r` at (x, y) overlaps no disk placed so far.
+    fn is_free(&self, domain: &Domain, radii: &Radii, x: f64, y: f64, r: f64) -> bool {
+        let overlaps = |ox: f64, oy: f64, other_r: f64| {
+            let (sx, sy) = domain.separation(x, y, ox, oy);
+            let contact = r + other_r;
+            sx * sx + sy * sy < contact * contact
+        };
+        let (cx, cy) = self.cell_of(x, y);
+        for dy in -1i64..=1 {
+            for dx in -1i64..=1 {
+                let Some(neighbour) =
+                    neighbour_cell(cx, cy, dx, dy, self.n_cols, self.n_rows, self.periodic)
+                else {
+                    continue;
+                };
+                let cell = &self.cells[neighbour];
+                if overlaps(cell.x, cell.y, cell.radius) {
+                    return false;
+                }
+                let mut other = cell.more;
+                while other != NO_DISK {
+                    let [ox, oy] = self.positions[other as usize];
+                    if overlaps(ox, oy, radii.of(other as usize)) {
+                        return false;
+                    }
+                    other = self.more[other as usize];
+                }
+            }
+        }
+        true
+    }
+
+    /// Adds the next disk (placement index `positions.len()`).
+    fn insert(&mut self, x: f64, y: f64, r: f64) {
+        let idx = self.positions.len() as u32;
+        let (cx, cy) = self.cell_of(x, y);
+        let cell = &mut self.cells[cy * self.n_cols + cx];
+        if cell.radius.is_nan() {
+            *cell = PlacementCell {
+                x,
+                y,
+                radius: r,
+                more: NO_DISK,
+            };
+            self.more.push(NO_DISK);
+        } else {
+            self.more.push(cell.more);
+            cell.more = idx;
+        }
+        self.positions.push([x, y]);
+    }
+}
+
+/// A hint to the memory system that `item` will be read soon.
+#[inline(always)]
+fn prefetch<T>(item: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        // SAFETY: a prefetch never faults and has no architectural effect; `item` is a
+        // valid reference anyway.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>((item as *const T).cast::<i8>()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = item;
+}
+
+/// Where random tries for a disk of radius `r` may land: the whole box when periodic,
+/// else clear of the walls, as (lo_x, hi_x, lo_y, hi_y).
+fn placement_bounds(domain: &Domain, r: f64) -> (f64, f64, f64, f64) {
+    if domain.boundary == Boundary::Periodic {
+        (0.0, domain.width, 0.0, domain.height)
+    } else {
+        (r, domain.width - r, r, domain.height - r)
+    }
+}
+
+/// Random sequential addition on a uniform grid (O(1) per try), positions in placement
+/// order.
+///
+/// The tries come from the seeded generator in a fixed sequence, two numbers each, and
+/// with equal disks try k lands where it lands whatever the earlier tries did. So a copy
+/// of the generator runs [`PREFETCH_TRIES_AHEAD`] tries ahead and prefetches the cells
+/// they will read (with unequal disks it uses the largest radius's bounds: a prefetch
+/// only needs to be about right). The generator itself is drawn exactly as without it.
 fn place_random(
     domain: &Domain,
-    radii: &[f64],
+    radii: &Radii,
+    n_particles: usize,
     rng: &mut Xoshiro256PlusPlus,
-) -> Result<Vec<(f64, f64)>, PlacementError> {
-    const NONE: u32 = u32::MAX;
-    let max_radius = radii.iter().copied().fold(0.0, f64::max);
-    // At least one contact diameter; wider in sparse boxes, so the grid never has more
-    // cells than disks.
-    let cell = (2.0 * max_radius).max((domain.area() / radii.len() as f64).sqrt());
-    let n_cols = ((domain.width / cell).floor() as usize).max(1);
-    let n_rows = ((domain.height / cell).floor() as usize).max(1);
-    let (cell_w, cell_h) = (domain.width / n_cols as f64, domain.height / n_rows as f64);
-    let mut head = vec![NONE; n_cols * n_rows];
-    let mut next = vec![NONE; radii.len()];
-    let mut positions: Vec<(f64, f64)> = Vec::with_capacity(radii.len());
-    let periodic = domain.boundary == Boundary::Periodic;
-    let cell_of = |x: f64, y: f64| {
-        (
-            ((x / cell_w) as usize).min(n_cols - 1),
-            ((y / cell_h) as usize).min(n_rows - 1),
-        )
+) -> Result<Vec<[f64; 2]>, PlacementError> {
+    let max_radius = (0..n_particles)
+        .map(|idx| radii.of(idx))
+        .fold(0.0, f64::max);
+    let mut grid = PlacementGrid::new(domain, max_radius, n_particles);
+    let mut ahead = rng.clone();
+    let (ahead_lo_x, ahead_hi_x, ahead_lo_y, ahead_hi_y) = placement_bounds(domain, max_radius);
+    let prefetch_next_try = |ahead: &mut Xoshiro256PlusPlus, grid: &PlacementGrid| {
+        let x = uniform_in(ahead, ahead_lo_x, ahead_hi_x);
+        let y = uniform_in(ahead, ahead_lo_y, ahead_hi_y);
+        grid.prefetch_block(x, y);
     };
-    for (idx, &r) in radii.iter().enumerate() {
-        let (lo_x, hi_x, lo_y, hi_y) = if periodic {
-            (0.0, domain.width, 0.0, domain.height)
-        } else {
-            (r, domain.width - r, r, domain.height - r)
-        };
+    for _ in 0..PREFETCH_TRIES_AHEAD {
+        prefetch_next_try(&mut ahead, &grid);
+    }
+    for idx in 0..n_particles {
+        let r = radii.of(idx);
+        let (lo_x, hi_x, lo_y, hi_y) = placement_bounds(domain, r);
         let mut tries = 0;
         let (x, y) = loop {
             if tries == MAX_TRIES_PER_DISK || lo_x > hi_x || lo_y > hi_y {
-                let placed_area: f64 = radii[..idx]
-                    .iter()
-                    .map(|r| std::f64::consts::PI * r * r)
-                    .sum();
                 return Err(PlacementError::Jammed {
                     placed: idx,
-                    n_particles: radii.len(),
-                    packing: placed_area / domain.area(),
+                    n_particles,
+                    packing: radii.area_of_first(idx) / domain.area(),
                 });
             }
             tries += 1;
+            prefetch_next_try(&mut ahead, &grid);
             let x = uniform_in(rng, lo_x, hi_x);
             let y = uniform_in(rng, lo_y, hi_y);
-            let (cx, cy) = cell_of(x, y);
-            let mut free = true;
-            'cells: for dy in -1i64..=1 {
-                for dx in -1i64..=1 {
-                    let Some(neighbour) = neighbour_cell(cx, cy, dx, dy, n_cols, n_rows, periodic)
-                    else {
-                        continue;
-                    };
-                    let mut other = head[neighbour];
-                    while other != NONE {
-                        let (ox, oy) = positions[other as usize];
-                        let (sx, sy) = domain.separation(x, y, ox, oy);
-                        let contact = r + radii[other as usize];
-                        if sx * sx + sy * sy < contact * contact {
-                            free = false;
-                            break 'cells;
-                        }
-                        other = next[other as usize];
-                    }
-                }
-            }
-            if free {
+            if grid.is_free(domain, radii, x, y, r) {
                 break (x, y);
             }
         };
-        let (cx, cy) = cell_of(x, y);
-        let cell_idx = cy * n_cols + cx;
-        next[idx] = head[cell_idx];
-        head[cell_idx] = idx as u32;
-        positions.push((x, y));
+        grid.insert(x, y, r);
     }
-    Ok(positions)
+    Ok(grid.positions)
 }
 
 /// Uniform in `[low, high)`, or `low` when the interval is a single point.
@@ -492,7 +719,7 @@ fn place_lattice(
     domain: &Domain,
     n_particles: usize,
     max_radius: f64,
-) -> Result<Vec<(f64, f64)>, PlacementError> {
+) -> Result<Vec<[f64; 2]>, PlacementError> {
     let aspect = domain.width / domain.height;
     let columns = ((n_particles as f64 * aspect).sqrt().ceil() as usize).max(1);
     let rows = n_particles.div_ceil(columns).max(1);
@@ -513,53 +740,55 @@ fn place_lattice(
     Ok((0..n_particles)
         .map(|i| {
             let (col, row) = (i % columns, i / columns);
-            (x0 + spacing * col as f64, y0 + spacing * row as f64)
+            [x0 + spacing * col as f64, y0 + spacing * row as f64]
         })
         .collect())
 }
 
-/// Maxwellian velocities at equipartition, with the centre-of-mass drift removed and the
-/// rms speed scaled to exactly `speed_rms`.
+/// Maxwellian velocities at equipartition for disks of mass `mass_of(idx)`, as (vx, vy)
+/// in placement order, with the centre-of-mass drift removed and the rms speed scaled to
+/// exactly `speed_rms`. Every sum runs in placement order.
 fn maxwellian_velocities(
-    masses: &[f64],
+    n_particles: usize,
+    mass_of: impl Fn(usize) -> f64,
     speed_rms: f64,
     rng: &mut Xoshiro256PlusPlus,
-) -> Vec<(f64, f64)> {
-    let mean_mass = masses.iter().sum::<f64>() / masses.len() as f64;
-    let mut velocities: Vec<(f64, f64)> = masses
-        .iter()
-        .map(|&m| {
-            let scale = (mean_mass / m).sqrt();
+) -> (Vec<f64>, Vec<f64>) {
+    let total_mass: f64 = (0..n_particles).map(&mass_of).sum();
+    let mean_mass = total_mass / n_particles as f64;
+    let (mut vx, mut vy): (Vec<f64>, Vec<f64>) = (0..n_particles)
+        .map(|idx| {
+            let scale = (mean_mass / mass_of(idx)).sqrt();
             let gx: f64 = rng.sample(StandardNormal);
             let gy: f64 = rng.sample(StandardNormal);
             (gx * scale, gy * scale)
         })
-        .collect();
-    let total_mass: f64 = masses.iter().sum();
-    let (px, py) = masses
-        .iter()
-        .zip(&velocities)
-        .fold((0.0, 0.0), |(px, py), (m, v)| (px + m * v.0, py + m * v.1));
+        .unzip();
+    let (px, py) = (0..n_particles).fold((0.0, 0.0), |(px, py), idx| {
+        let m = mass_of(idx);
+        (px + m * vx[idx], py + m * vy[idx])
+    });
     let (drift_x, drift_y) = (px / total_mass, py / total_mass);
-    for v in &mut velocities {
-        v.0 -= drift_x;
-        v.1 -= drift_y;
+    for (vx, vy) in vx.iter_mut().zip(&mut vy) {
+        *vx -= drift_x;
+        *vy -= drift_y;
     }
-    let mean_square = velocities
+    let mean_square = vx
         .iter()
-        .map(|v| v.0 * v.0 + v.1 * v.1)
+        .zip(&vy)
+        .map(|(vx, vy)| vx * vx + vy * vy)
         .sum::<f64>()
-        / velocities.len() as f64;
+        / n_particles as f64;
     let scale = if mean_square > 0.0 {
         speed_rms / mean_square.sqrt()
     } else {
         0.0
     };
-    for v in &mut velocities {
-        v.0 *= scale;
-        v.1 *= scale;
+    for (vx, vy) in vx.iter_mut().zip(&mut vy) {
+        *vx *= scale;
+        *vy *= scale;
     }
-    velocities
+    (vx, vy)
 }
 
 #[cfg(test)]
