@@ -541,13 +541,19 @@ impl PlacementGrid {
         )
     }
 
-    /// Asks the memory system for the 3×3 block of cells around (x, y). A hint only:
-    /// edges are clamped rather than wrapped.
-    fn prefetch_block(&self, x: f64, y: f64) {
+    /// The cells of the 3×3 block around (x, y), as rows and columns (fewer at walls).
+    fn block(&self, x: f64, y: f64) -> (Lines, Lines) {
         let (cx, cy) = self.cell_of(x, y);
-        let (col_lo, col_hi) = (cx.saturating_sub(1), (cx + 1).min(self.n_cols - 1));
-        for row in cy.saturating_sub(1)..=(cy + 1).min(self.n_rows - 1) {
-            for col in [col_lo, cx, col_hi] {
+        let rows = neighbour_lines(cy, self.n_rows, self.periodic);
+        let cols = neighbour_lines(cx, self.n_cols, self.periodic);
+        (rows, cols)
+    }
+
+    /// Asks the memory system for the 3×3 block of cells around (x, y).
+    fn prefetch_block(&self, x: f64, y: f64) {
+        let (rows, cols) = self.block(x, y);
+        for &row in rows.as_slice() {
+            for &col in cols.as_slice() {
                 prefetch(&self.cells[row * self.n_cols + col]);
             }
         }
@@ -560,15 +566,10 @@ impl PlacementGrid {
             let contact = r + other_r;
             sx * sx + sy * sy < contact * contact
         };
-        let (cx, cy) = self.cell_of(x, y);
-        for dy in -1i64..=1 {
-            for dx in -1i64..=1 {
-                let Some(neighbour) =
-                    neighbour_cell(cx, cy, dx, dy, self.n_cols, self.n_rows, self.periodic)
-                else {
-                    continue;
-                };
-                let cell = &self.cells[neighbour];
+        let (rows, cols) = self.block(x, y);
+        for &row in rows.as_slice() {
+            for &col in cols.as_slice() {
+                let cell = &self.cells[row * self.n_cols + col];
                 if overlaps(cell.x, cell.y, cell.radius) {
                     return false;
                 }
@@ -692,26 +693,39 @@ fn uniform_in(rng: &mut Xoshiro256PlusPlus, low: f64, high: f64) -> f64 {
     }
 }
 
-/// The neighbour of cell (cx, cy) at offset (dx, dy), wrapped when periodic.
-/// Small grids may map several offsets to one cell; placement only reads, so that is harmless.
-fn neighbour_cell(
-    cx: usize,
-    cy: usize,
-    dx: i64,
-    dy: i64,
-    n_cols: usize,
-    n_rows: usize,
-    periodic: bool,
-) -> Option<usize> {
-    let (mut nx, mut ny) = (cx as i64 + dx, cy as i64 + dy);
-    let (cols, rows) = (n_cols as i64, n_rows as i64);
-    if periodic {
-        nx = nx.rem_euclid(cols);
-        ny = ny.rem_euclid(rows);
-    } else if nx < 0 || ny < 0 || nx >= cols || ny >= rows {
-        return None;
+/// Up to three cell indices along one axis of the grid.
+#[derive(Clone, Copy)]
+struct Lines {
+    indices: [usize; 3],
+    len: usize,
+}
+
+impl Lines {
+    fn as_slice(&self) -> &[usize] {
+        &self.indices[..self.len]
     }
-    Some(ny as usize * n_cols + nx as usize)
+}
+
+/// Cell `c` and its two neighbours along an axis of `n` cells: wrapped when periodic,
+/// cut off at walls. Small periodic grids may list one cell more than once; placement
+/// only reads, so that is harmless.
+#[inline(always)]
+fn neighbour_lines(c: usize, n: usize, periodic: bool) -> Lines {
+    if periodic {
+        let before = if c == 0 { n - 1 } else { c - 1 };
+        let after = if c + 1 == n { 0 } else { c + 1 };
+        Lines {
+            indices: [before, c, after],
+            len: 3,
+        }
+    } else {
+        let first = c.saturating_sub(1);
+        let last = (c + 1).min(n - 1);
+        Lines {
+            indices: [first, first + 1, first + 2],
+            len: last - first + 1,
+        }
+    }
 }
 
 /// Disk centres on a square lattice as close to the box's aspect as possible.
