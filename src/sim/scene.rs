@@ -352,8 +352,10 @@ impl GasSpec {
             self.speed_rms,
             &mut rng,
         );
-        let vx = gather(&order, |idx| vx[idx]);
-        let vy = gather(&order, |idx| vy[idx]);
+        // One array in flight at a time: each placement-order array is freed as soon as
+        // its storage-order copy is made.
+        let vx = moved_to_storage_order(&order, vx);
+        let vy = moved_to_storage_order(&order, vy);
         let radius = gather(&order, |idx| radii.of(idx));
         drop((order, radii));
         let mass = radius.iter().map(|&r| mass_of(r)).collect();
@@ -399,9 +401,14 @@ impl Radii {
     }
 }
 
-/// `values(order[k])` for every k: an array moved from placement order into storage order.
+/// `values(order[k])` for every k: an array from placement order in storage order.
 fn gather(order: &[u32], values: impl Fn(usize) -> f64) -> Vec<f64> {
     order.iter().map(|&idx| values(idx as usize)).collect()
+}
+
+/// [`gather`] for an array that is not needed in placement order any more.
+fn moved_to_storage_order(order: &[u32], values: Vec<f64>) -> Vec<f64> {
+    gather(order, |idx| values[idx])
 }
 
 /// Placement indices in storage order: by row of height `row_height` (counted from
@@ -498,8 +505,49 @@ const EMPTY_CELL: PlacementCell = PlacementCell {
     more: NO_DISK,
 };
 
-/// Tries whose cells are fetched ahead of the try that reads them.
-const PREFETCH_TRIES_AHEAD: usize = 8;
+/// Tries whose cells are fetched ahead of the try that reads them; the further disks
+/// listed in those cells are fetched half as far ahead, once the cells have arrived.
+const PREFETCH_TRIES_AHEAD: usize = 16;
+
+/// A copy of the placement generator running [`PREFETCH_TRIES_AHEAD`] tries ahead, with
+/// the tries it drew since.
+struct Lookahead {
+    rng: Xoshiro256PlusPlus,
+    /// Where tries land: the bounds of the largest disk.
+    bounds: (f64, f64, f64, f64),
+    upcoming: [(f64, f64); PREFETCH_TRIES_AHEAD],
+    newest: usize,
+}
+
+impl Lookahead {
+    fn new(rng: &Xoshiro256PlusPlus, bounds: (f64, f64, f64, f64), grid: &PlacementGrid) -> Self {
+        let mut lookahead = Lookahead {
+            rng: rng.clone(),
+            bounds,
+            upcoming: [(f64::NAN, f64::NAN); PREFETCH_TRIES_AHEAD],
+            newest: 0,
+        };
+        for _ in 0..PREFETCH_TRIES_AHEAD {
+            lookahead.advance(grid);
+        }
+        lookahead
+    }
+
+    /// Draws one more try: prefetches its cells, and the further disks listed in the
+    /// cells of the try half as far ahead.
+    fn advance(&mut self, grid: &PlacementGrid) {
+        let (lo_x, hi_x, lo_y, hi_y) = self.bounds;
+        let x = uniform_in(&mut self.rng, lo_x, hi_x);
+        let y = uniform_in(&mut self.rng, lo_y, hi_y);
+        grid.prefetch_block(x, y);
+        self.newest = (self.newest + 1) % PREFETCH_TRIES_AHEAD;
+        self.upcoming[self.newest] = (x, y);
+        let (x, y) = self.upcoming[(self.newest + PREFETCH_TRIES_AHEAD / 2) % PREFETCH_TRIES_AHEAD];
+        if !x.is_nan() {
+            grid.prefetch_listed(x, y);
+        }
+    }
+}
 
 /// The uniform grid of [`place_random`] and the disks placed so far.
 struct PlacementGrid {
@@ -522,10 +570,12 @@ impl PlacementGrid {
         let cell = (2.0 * max_radius).max((domain.area() / n_particles as f64).sqrt());
         let n_cols = ((domain.width / cell).floor() as usize).max(1);
         let n_rows = ((domain.height / cell).floor() as usize).max(1);
+        let mut cells = with_huge_pages(n_cols * n_rows);
+        cells.resize(n_cols * n_rows, EMPTY_CELL);
         PlacementGrid {
-            cells: vec![EMPTY_CELL; n_cols * n_rows],
-            more: Vec::with_capacity(n_particles),
-            positions: Vec::with_capacity(n_particles),
+            cells,
+            more: with_huge_pages(n_particles),
+            positions: with_huge_pages(n_particles),
             n_cols,
             n_rows,
             cell_w: domain.width / n_cols as f64,
@@ -555,6 +605,21 @@ impl PlacementGrid {
         for &row in rows.as_slice() {
             for &col in cols.as_slice() {
                 prefetch(&self.cells[row * self.n_cols + col]);
+            }
+        }
+    }
+
+    /// Asks the memory system for the first further disk listed in each cell of the
+    /// 3×3 block around (x, y).
+    fn prefetch_listed(&self, x: f64, y: f64) {
+        let (rows, cols) = self.block(x, y);
+        for &row in rows.as_slice() {
+            for &col in cols.as_slice() {
+                let other = self.cells[row * self.n_cols + col].more;
+                if other != NO_DISK {
+                    prefetch(&self.positions[other as usize]);
+                    prefetch(&self.more[other as usize]);
+                }
             }
         }
     }
@@ -607,6 +672,32 @@ impl PlacementGrid {
     }
 }
 
+/// An empty vector with room for `capacity` items, backed by huge pages where the
+/// system offers them on request (Linux's transparent huge pages in `madvise` mode):
+/// random reads all over a big grid then miss the TLB far less. A hint only.
+fn with_huge_pages<T>(capacity: usize) -> Vec<T> {
+    let values = Vec::with_capacity(capacity);
+    #[cfg(target_os = "linux")]
+    {
+        const PAGE: usize = 4096;
+        let start = values.as_ptr() as usize;
+        let end = start + capacity * std::mem::size_of::<T>();
+        let first_page = start.next_multiple_of(PAGE);
+        if end > first_page {
+            // SAFETY: the range lies inside this vector's allocation, and the advice
+            // changes no contents (it only allows the kernel to back it with huge pages).
+            unsafe {
+                libc::madvise(
+                    first_page as *mut libc::c_void,
+                    end - first_page,
+                    libc::MADV_HUGEPAGE,
+                );
+            }
+        }
+    }
+    values
+}
+
 /// A hint to the memory system that `item` will be read soon.
 #[inline(always)]
 fn prefetch<T>(item: &T) {
@@ -649,16 +740,7 @@ fn place_random(
         .map(|idx| radii.of(idx))
         .fold(0.0, f64::max);
     let mut grid = PlacementGrid::new(domain, max_radius, n_particles);
-    let mut ahead = rng.clone();
-    let (ahead_lo_x, ahead_hi_x, ahead_lo_y, ahead_hi_y) = placement_bounds(domain, max_radius);
-    let prefetch_next_try = |ahead: &mut Xoshiro256PlusPlus, grid: &PlacementGrid| {
-        let x = uniform_in(ahead, ahead_lo_x, ahead_hi_x);
-        let y = uniform_in(ahead, ahead_lo_y, ahead_hi_y);
-        grid.prefetch_block(x, y);
-    };
-    for _ in 0..PREFETCH_TRIES_AHEAD {
-        prefetch_next_try(&mut ahead, &grid);
-    }
+    let mut lookahead = Lookahead::new(rng, placement_bounds(domain, max_radius), &grid);
     for idx in 0..n_particles {
         let r = radii.of(idx);
         let (lo_x, hi_x, lo_y, hi_y) = placement_bounds(domain, r);
@@ -672,7 +754,7 @@ fn place_random(
                 });
             }
             tries += 1;
-            prefetch_next_try(&mut ahead, &grid);
+            lookahead.advance(&grid);
             let x = uniform_in(rng, lo_x, hi_x);
             let y = uniform_in(rng, lo_y, hi_y);
             if grid.is_free(domain, radii, x, y, r) {
