@@ -339,24 +339,19 @@ impl GasSpec {
         // goes by id, so numbering neighbours close together keeps every pass over the
         // contacts close in memory. Placement order is random in space.
         let order = row_order(&positions, 2.0 * max_radius);
-        let x = gather(&order, |idx| positions[idx][0]);
-        let y = gather(&order, |idx| positions[idx][1]);
-        drop(positions);
+        let (x, y) = moved_to_storage_order(&order, positions);
         let mass_of = |radius: f64| match self.mass {
             MassRule::Fixed(m) => m,
             MassRule::Area => std::f64::consts::PI * radius * radius,
         };
-        let (vx, vy) = maxwellian_velocities(
+        let velocities = maxwellian_velocities(
             n_particles,
             |idx| mass_of(radii.of(idx)),
             self.speed_rms,
             &mut rng,
         );
-        // One array in flight at a time: each placement-order array is freed as soon as
-        // its storage-order copy is made.
-        let vx = moved_to_storage_order(&order, vx);
-        let vy = moved_to_storage_order(&order, vy);
-        let radius = gather(&order, |idx| radii.of(idx));
+        let (vx, vy) = moved_to_storage_order(&order, velocities);
+        let radius: Vec<f64> = order.iter().map(|&idx| radii.of(idx as usize)).collect();
         drop((order, radii));
         let mass = radius.iter().map(|&r| mass_of(r)).collect();
         Ok(Scene {
@@ -401,14 +396,15 @@ impl Radii {
     }
 }
 
-/// `values(order[k])` for every k: an array from placement order in storage order.
-fn gather(order: &[u32], values: impl Fn(usize) -> f64) -> Vec<f64> {
-    order.iter().map(|&idx| values(idx as usize)).collect()
-}
-
-/// [`gather`] for an array that is not needed in placement order any more.
-fn moved_to_storage_order(order: &[u32], values: Vec<f64>) -> Vec<f64> {
-    gather(order, |idx| values[idx])
+/// The pairs `pairs[order[k]]` for every k as two arrays: positions or velocities moved
+/// from placement order into storage order, both coordinates in one pass over memory.
+/// The placement-order pairs are freed at once, so one copy is in flight at a time.
+fn moved_to_storage_order(order: &[u32], pairs: Vec<[f64; 2]>) -> (Vec<f64>, Vec<f64>) {
+    order
+        .iter()
+        .map(|&idx| pairs[idx as usize])
+        .map(|[a, b]| (a, b))
+        .unzip()
 }
 
 /// Placement indices in storage order: by row of height `row_height` (counted from
@@ -431,32 +427,23 @@ fn row_order(positions: &[[f64; 2]], row_height: f64) -> Vec<u32> {
     for bucket in 1..starts.len() {
         starts[bucket] += starts[bucket - 1];
     }
-    let mut order = vec![0u32; positions.len()];
+    // Sort keys scattered straight into their buckets (zeroed memory costs nothing
+    // until written): (row, x, placement index), unique, so an unstable sort is stable.
+    let mut keys = vec![(0i64, 0i64, 0u32); positions.len()];
     let mut next_slot = starts.clone();
     for (idx, position) in positions.iter().enumerate() {
         let slot = &mut next_slot[bucket_of(position)];
-        order[*slot as usize] = idx as u32;
+        keys[*slot as usize] = (
+            total_order_key(row_of(position)),
+            total_order_key(position[0]),
+            idx as u32,
+        );
         *slot += 1;
     }
-    let mut keys = Vec::new();
     for bucket in starts.windows(2) {
-        let members = &mut order[bucket[0] as usize..bucket[1] as usize];
-        keys.clear();
-        keys.extend(members.iter().map(|&idx| {
-            let position = &positions[idx as usize];
-            (
-                total_order_key(row_of(position)),
-                total_order_key(position[0]),
-                idx,
-            )
-        }));
-        // Keys are unique (the placement index is last), so an unstable sort is stable here.
-        keys.sort_unstable();
-        for (member, key) in members.iter_mut().zip(&keys) {
-            *member = key.2;
-        }
+        keys[bucket[0] as usize..bucket[1] as usize].sort_unstable();
     }
-    order
+    keys.into_iter().map(|key| key.2).collect()
 }
 
 /// An integer that orders like `f64::total_cmp` (the same bit trick).
@@ -841,7 +828,7 @@ fn place_lattice(
         .collect())
 }
 
-/// Maxwellian velocities at equipartition for disks of mass `mass_of(idx)`, as (vx, vy)
+/// Maxwellian velocities at equipartition for disks of mass `mass_of(idx)`, as [vx, vy]
 /// in placement order, with the centre-of-mass drift removed and the rms speed scaled to
 /// exactly `speed_rms`. Every sum runs in placement order.
 fn maxwellian_velocities(
@@ -849,30 +836,32 @@ fn maxwellian_velocities(
     mass_of: impl Fn(usize) -> f64,
     speed_rms: f64,
     rng: &mut Xoshiro256PlusPlus,
-) -> (Vec<f64>, Vec<f64>) {
+) -> Vec<[f64; 2]> {
     let total_mass: f64 = (0..n_particles).map(&mass_of).sum();
     let mean_mass = total_mass / n_particles as f64;
-    let (mut vx, mut vy): (Vec<f64>, Vec<f64>) = (0..n_particles)
+    let mut velocities: Vec<[f64; 2]> = (0..n_particles)
         .map(|idx| {
             let scale = (mean_mass / mass_of(idx)).sqrt();
             let gx: f64 = rng.sample(StandardNormal);
             let gy: f64 = rng.sample(StandardNormal);
-            (gx * scale, gy * scale)
+            [gx * scale, gy * scale]
         })
-        .unzip();
-    let (px, py) = (0..n_particles).fold((0.0, 0.0), |(px, py), idx| {
-        let m = mass_of(idx);
-        (px + m * vx[idx], py + m * vy[idx])
-    });
-    let (drift_x, drift_y) = (px / total_mass, py / total_mass);
-    for (vx, vy) in vx.iter_mut().zip(&mut vy) {
-        *vx -= drift_x;
-        *vy -= drift_y;
-    }
-    let mean_square = vx
+        .collect();
+    let (px, py) = velocities
         .iter()
-        .zip(&vy)
-        .map(|(vx, vy)| vx * vx + vy * vy)
+        .enumerate()
+        .fold((0.0, 0.0), |(px, py), (idx, v)| {
+            let m = mass_of(idx);
+            (px + m * v[0], py + m * v[1])
+        });
+    let (drift_x, drift_y) = (px / total_mass, py / total_mass);
+    for v in &mut velocities {
+        v[0] -= drift_x;
+        v[1] -= drift_y;
+    }
+    let mean_square = velocities
+        .iter()
+        .map(|v| v[0] * v[0] + v[1] * v[1])
         .sum::<f64>()
         / n_particles as f64;
     let scale = if mean_square > 0.0 {
@@ -880,11 +869,11 @@ fn maxwellian_velocities(
     } else {
         0.0
     };
-    for (vx, vy) in vx.iter_mut().zip(&mut vy) {
-        *vx *= scale;
-        *vy *= scale;
+    for v in &mut velocities {
+        v[0] *= scale;
+        v[1] *= scale;
     }
-    (vx, vy)
+    velocities
 }
 
 #[cfg(test)]
