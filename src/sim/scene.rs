@@ -1,6 +1,8 @@
 //! The box, its boundary, the contact physics, and seeded initial conditions.
 //!
 //! Everything here is pure: a [`GasSpec`] and its seed always give the same disks.
+//! (Placement gives the memory system hints, prefetches and huge pages, that change
+//! how fast the disks come, never which.)
 //! Parsing scene files lives in `crate::scene_file`; this module only builds state.
 
 use rand::{RngExt, SeedableRng};
@@ -669,14 +671,16 @@ fn with_huge_pages<T>(capacity: usize) -> Vec<T> {
         const PAGE: usize = 4096;
         let start = values.as_ptr() as usize;
         let end = start + capacity * std::mem::size_of::<T>();
-        let first_page = start.next_multiple_of(PAGE);
-        if end > first_page {
+        // Whole pages inside the allocation only.
+        let (first_page, end_page) = (start.next_multiple_of(PAGE), end / PAGE * PAGE);
+        if end_page > first_page {
             // SAFETY: the range lies inside this vector's allocation, and the advice
             // changes no contents (it only allows the kernel to back it with huge pages).
+            // Failure (an old kernel, no huge pages) leaves ordinary pages: ignored.
             unsafe {
                 libc::madvise(
                     first_page as *mut libc::c_void,
-                    end - first_page,
+                    end_page - first_page,
                     libc::MADV_HUGEPAGE,
                 );
             }
