@@ -429,8 +429,9 @@ fn row_order(positions: &[[f64; 2]], row_height: f64) -> Vec<u32> {
     for bucket in 1..starts.len() {
         starts[bucket] += starts[bucket - 1];
     }
-    // Sort keys scattered straight into their buckets (zeroed memory costs nothing
-    // until written): (row, x, placement index), unique, so an unstable sort is stable.
+    // Sort keys scattered straight into their buckets, so that sorting reads no
+    // positions at random: (row, x, placement index), unique, so an unstable sort is
+    // stable. With the positions they take 40 bytes per disk, less than the finished disks.
     let mut keys = vec![(0i64, 0i64, 0u32); positions.len()];
     let mut next_slot = starts.clone();
     for (idx, position) in positions.iter().enumerate() {
