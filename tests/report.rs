@@ -56,6 +56,7 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         pair_collisions: 1734,
         wall_collisions: 182,
         max_overlap: 0.138,
+        max_wall_penetration: 0.0,
         state_hash: "51a3e11e31576e81".into(),
         method: "step".into(),
         observe: "timing".into(),

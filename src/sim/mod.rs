@@ -12,6 +12,7 @@ pub mod grid;
 pub mod observe;
 pub mod particles;
 pub mod pilot;
+pub mod resolve;
 pub mod scene;
 pub mod schedule;
 pub mod step;
