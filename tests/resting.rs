@@ -57,7 +57,11 @@ fn pile() -> Scene {
             let (row, col) = (k / 4, k % 4);
             let radius = 0.4 + 0.2 * ((k * 7919) % 13) as f64 / 12.0;
             let offset = if row % 2 == 0 { 0.0 } else { 0.45 };
-            disk(0.7 + 1.2 * col as f64 + offset, 0.7 + 1.3 * row as f64, radius)
+            disk(
+                0.7 + 1.2 * col as f64 + offset,
+                0.7 + 1.3 * row as f64,
+                radius,
+            )
         })
         .collect();
     Scene {
@@ -95,7 +99,8 @@ fn run(scene: &Scene, dt: f64, duration: f64) -> Halves {
             stepper.step(&mut particles);
             for idx in 0..particles.len() {
                 let (x, y, r) = (particles.x[idx], particles.y[idx], particles.radius[idx]);
-                let inside = |p: f64, length: f64| p - r >= -BOUND * r && p + r <= length + BOUND * r;
+                let inside =
+                    |p: f64, length: f64| p - r >= -BOUND * r && p + r <= length + BOUND * r;
                 assert!(
                     inside(x, scene.domain.width) && inside(y, scene.domain.height),
                     "dt {dt}: disk {} left the box in half {half}, step {step}: ({x}, {y}), \
@@ -130,7 +135,10 @@ fn assert_rests(name: &str, scene: &Scene, dt: f64, duration: f64) {
             last.max_wall_penetration,
         ),
     ] {
-        assert!(last <= BOUND, "{name} dt {dt}: {what} {last} in the last half");
+        assert!(
+            last <= BOUND,
+            "{name} dt {dt}: {what} {last} in the last half"
+        );
         // Resting contacts settle at the slop the position projection leaves; beyond
         // that, the last half must not go deeper than the first.
         assert!(
