@@ -9,7 +9,7 @@
 //! contacts with no ghost and no exported disk are the rank's alone and resolved there,
 //! in canonical order. Every other chain may span ranks: its contacts (with both
 //! disks' states) are gathered on every rank, which resolve them all in canonical
-//! order and keep the velocities of their own disks. So every chain sees its contacts
+//! order and keep the new state of their own disks. So every chain sees its contacts
 //! in the serial order, which is why the bits agree.
 
 use std::collections::HashMap;
