@@ -520,6 +520,25 @@ mod tests {
     }
 
     #[test]
+    fn ranks_as_threads_give_the_serial_hash_for_a_pile_resting_under_gravity() {
+        let mut spec = spec(Boundary::Walls, 0.5, 0.3);
+        if let SceneSource::Gas(gas) = &mut spec.scene {
+            gas.physics.gravity = Some([0.0, -1.0]);
+        }
+        spec.method = MethodSpec::stepped(0.05, 600, Broadphase::Grid);
+        let reference = serial::run(&spec).unwrap().summary;
+        assert!(reference.max_wall_penetration > 0.0);
+        for ranks in [2, 3, 4] {
+            let summary = run_on_threads(&spec, ranks).summary;
+            assert_eq!(summary.state_hash, reference.state_hash, "{ranks} ranks");
+            assert_eq!(
+                summary.max_wall_penetration, reference.max_wall_penetration,
+                "{ranks} ranks"
+            );
+        }
+    }
+
+    #[test]
     fn more_ranks_than_strips_is_refused_with_the_limit() {
         let spec = spec(Boundary::Walls, 1.0, 0.05);
         let prepared = spec.prepare().unwrap();
