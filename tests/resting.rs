@@ -50,7 +50,7 @@ fn column() -> Scene {
 }
 
 /// 60 disks of radii 0.4 to 0.6, in rows of four with staggered offsets, dropped into a
-/// box five radii... wide: a narrow pile several disks deep.
+/// box 5.5 wide (about five diameters): a narrow pile a dozen disks deep.
 fn pile() -> Scene {
     let disks: Vec<Disk> = (0..60)
         .map(|k| {
