@@ -13,6 +13,11 @@ use crate::results::median;
 /// issue 6's default tolerance for `dt = "auto"`).
 pub const FAILURE_MISSED_FRACTION: f64 = 1e-3;
 
+/// A run whose disks went deeper into a wall than this fraction of their radius is
+/// flagged: its walls do not hold (a step too coarse for the speeds at the walls, or
+/// resting contact that sinks).
+pub const FLAG_WALL_PENETRATION: f64 = 0.1;
+
 /// One method at one packing, dt and TC time: medians over its repetitions.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AccuracyPoint {
@@ -37,6 +42,8 @@ pub struct AccuracyPoint {
     /// NaN where not measured (step method without `observe = "accuracy"`).
     pub missed_fraction: f64,
     pub max_overlap: f64,
+    /// Fraction of the radius; NaN in records older than schema version 6.
+    pub max_wall_penetration: f64,
     pub compressibility_z: f64,
     pub collision_rate: f64,
     /// (Z − Z_ref)/Z_ref against the event reference at the same packing; NaN without one.
@@ -49,6 +56,11 @@ impl AccuracyPoint {
     /// The step failed: more than [`FAILURE_MISSED_FRACTION`] of its collisions missed.
     pub fn failed(&self) -> bool {
         self.missed_fraction > FAILURE_MISSED_FRACTION
+    }
+
+    /// Disks went more than [`FLAG_WALL_PENETRATION`] of their radius into a wall.
+    pub fn deep_in_walls(&self) -> bool {
+        self.max_wall_penetration > FLAG_WALL_PENETRATION
     }
 }
 
@@ -161,6 +173,7 @@ fn summarise(method: &str, runs: &[&Record]) -> AccuracyPoint {
         sim_time_per_s: sim_time / wall_s,
         missed_fraction: med(|r| r.missed_collision_fraction),
         max_overlap: med(|r| r.max_overlap),
+        max_wall_penetration: med(|r| r.max_wall_penetration),
         compressibility_z: med(|r| r.compressibility_z),
         collision_rate: med(|r| r.collision_rate),
         z_error: f64::NAN,

@@ -14,7 +14,7 @@ use crate::manifest::Scaling;
 use crate::output::write_atomically;
 use crate::summary::RunSummary;
 
-pub const SCHEMA_VERSION: u32 = 5;
+pub const SCHEMA_VERSION: u32 = 6;
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
 const OLDEST_READABLE_VERSION: u32 = 1;
 
@@ -57,6 +57,8 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     // no successful row had a collapse) and did not record the event method's TC time.
     (5, "collapse_time", Fill::F64(f64::NAN)),
     (5, "tc", Fill::F64(f64::NAN)),
+    // Version 5 did not measure how far disks went into the walls.
+    (6, "max_wall_penetration", Fill::F64(f64::NAN)),
 ];
 
 /// What became of one run.
@@ -111,6 +113,8 @@ pub struct Record {
     pub pair_collisions: u64,
     pub wall_collisions: u64,
     pub max_overlap: f64,
+    /// Largest penetration into a wall, as a fraction of the radius (see the JSON summary).
+    pub max_wall_penetration: f64,
     pub state_hash: String,
     /// `step` or `event`; `timing` or `accuracy` (see the JSON summary).
     pub method: String,
@@ -210,6 +214,7 @@ impl Record {
         record.pair_collisions = summary.pair_collisions;
         record.wall_collisions = summary.wall_collisions;
         record.max_overlap = summary.max_overlap;
+        record.max_wall_penetration = summary.max_wall_penetration;
         record.state_hash = summary.state_hash.clone();
         record.method = summary.method.clone();
         record.observe = summary.observe.clone();
@@ -289,6 +294,7 @@ impl Record {
             pair_collisions: 0,
             wall_collisions: 0,
             max_overlap: f64::NAN,
+            max_wall_penetration: f64::NAN,
             state_hash: String::new(),
             method: String::new(),
             observe: String::new(),
@@ -417,7 +423,8 @@ macro_rules! for_each_column {
             f64: dt, packing, wall_s, cpu_s, setup_s, fps, particle_steps_per_s, integration_s,
                  broad_phase_s, collision_s, communication_s, kinetic_energy_initial,
                  kinetic_energy_final, momentum_initial_x, momentum_initial_y,
-                 momentum_final_x, momentum_final_y, max_overlap, load_average_start,
+                 momentum_final_x, momentum_final_y, max_overlap, max_wall_penetration,
+                 load_average_start,
                  load_average, load_average_end, events_per_s, collision_rate, temperature,
                  pressure, compressibility_z, missed_collision_fraction, mean_overlap,
                  energy_relative_error, rms_step_over_radius, collapse_time, tc;

@@ -5,8 +5,8 @@
 use std::fmt::Write as _;
 
 use crate::accuracy::{
-    AccuracyPoint, Breakdown, CoolingCurve, FAILURE_MISSED_FRACTION, HAFF_BREAKDOWN, PackingGroup,
-    method_label,
+    AccuracyPoint, Breakdown, CoolingCurve, FAILURE_MISSED_FRACTION, FLAG_WALL_PENETRATION,
+    HAFF_BREAKDOWN, PackingGroup, method_label,
 };
 use crate::accuracy_figures::COOLING_FILE;
 use crate::analysis::{Baseline, Setup};
@@ -471,7 +471,8 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
         "Each row is the median of its repetitions. Errors of the pressure (Z = P·A/(N·T)) and \
          of the collision rate ω are relative to the event method at the same packing and \
          the same initial state; a step fails (**bold**) when it misses more than \
-         {FAILURE_MISSED_FRACTION:e} of its collisions. Speed is simulated time per wall \
+         {FAILURE_MISSED_FRACTION:e} of its collisions; a wall penetration is **bold** above \
+         {FLAG_WALL_PENETRATION} of the radius. Speed is simulated time per wall \
          second (every run simulates the same time, so it compares methods at equal \
          physics); particle-steps/s counts each method's own steps.\n"
     );
@@ -486,7 +487,7 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
         let _ = writeln!(out, "### Packing {:.2}\n", group.packing);
         let _ = writeln!(
             out,
-            "| method | dt | v_rms·dt/r | wall s | sim time / s | particle-steps/s | missed fraction | max overlap | Z | Z error | ω | ω error |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+            "| method | dt | v_rms·dt/r | wall s | sim time / s | particle-steps/s | missed fraction | max overlap | max wall penetration | Z | Z error | ω | ω error |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
         );
         // One row per point; the event method has no step (exact times), misses nothing
         // and overlaps only by rounding; the reference has no error of its own.
@@ -518,6 +519,13 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
                     format!("{:.3}", p.max_overlap),
                 )
             };
+            let wall = bold_if(
+                p.deep_in_walls(),
+                cell(
+                    p.max_wall_penetration,
+                    format!("{:.3}", p.max_wall_penetration),
+                ),
+            );
             let error = |value: f64| {
                 if is_reference {
                     "reference".to_owned()
@@ -527,7 +535,7 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
             };
             let _ = writeln!(
                 out,
-                "| {method} | {dt} | {step} | {:.4} | {:.1} | {:.3e} | {missed} | {overlap} | {:.4} | {} | {:.4} | {} |",
+                "| {method} | {dt} | {step} | {:.4} | {:.1} | {:.3e} | {missed} | {overlap} | {wall} | {:.4} | {} | {:.4} | {} |",
                 p.wall_s,
                 p.sim_time_per_s,
                 p.particle_steps_per_s,

@@ -62,6 +62,11 @@ pub struct RunSummary {
     pub wall_collisions: u64,
     /// Largest overlap seen, as a fraction of the pair's contact distance.
     pub max_overlap: f64,
+    /// Largest penetration of a disk into a wall seen after a move, as a fraction of its
+    /// radius (0 with periodic boundaries and for the event method, which stops disks at
+    /// the wall).
+    #[serde(default)]
+    pub max_wall_penetration: f64,
     /// xxh3-64 of the bits of final x, y, vx, vy in id order: equal hashes, identical states.
     pub state_hash: String,
     /// `"step"` (time steps of dt) or `"event"` (the exact event-driven reference).
@@ -214,10 +219,12 @@ impl fmt::Display for RunSummary {
         )?;
         writeln!(
             f,
-            "collisions {} pair, {} wall; max overlap {:.3}% of contact distance",
+            "collisions {} pair, {} wall; max overlap {:.3}% of contact distance, max wall \
+             penetration {:.3}% of radius",
             self.pair_collisions,
             self.wall_collisions,
-            100.0 * self.max_overlap
+            100.0 * self.max_overlap,
+            100.0 * self.max_wall_penetration
         )?;
         let show =
             |value: Option<f64>| value.map_or_else(|| "n/a".to_owned(), |v| format!("{v:.4e}"));

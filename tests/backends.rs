@@ -86,3 +86,36 @@ fn rayon_all_pairs_and_gravity_give_the_serial_hash() {
     let all_pairs = threads::run(&run_spec(gas, Broadphase::AllPairs), threads(2)).unwrap();
     assert_eq!(grid.summary.state_hash, all_pairs.summary.state_hash);
 }
+
+/// A gas falling into a pile on the floor of a walled box: resting contact (the sweeps
+/// and the position projection) on every band and across bands gives the serial bits.
+#[test]
+fn rayon_gives_the_serial_hash_for_a_pile_resting_under_gravity() {
+    let gas = GasSpec {
+        radius: RadiusDistribution::Uniform { min: 0.6, max: 1.4 },
+        mass: MassRule::Area,
+        boundary: Boundary::Walls,
+        physics: Physics {
+            gravity: Some([0.0, -1.0]),
+            ..Physics::with_restitution(0.5)
+        },
+        seed: 8,
+        ..GasSpec::unit(800, 0.3)
+    };
+    let spec = RunSpec {
+        scene: SceneSource::Gas(gas),
+        method: MethodSpec::stepped(0.05, 600, Broadphase::Grid),
+        slowdown: InjectedSlowdown::NONE,
+    };
+    let reference = serial::run(&spec).unwrap().summary;
+    assert!(reference.max_wall_penetration > 0.0);
+    for n in [2, 3, 4] {
+        let summary = threads::run(&spec, threads(n)).unwrap().summary;
+        assert_eq!(summary.state_hash, reference.state_hash, "{n} threads");
+        assert_eq!(summary.max_overlap, reference.max_overlap, "{n} threads");
+        assert_eq!(
+            summary.max_wall_penetration, reference.max_wall_penetration,
+            "{n} threads"
+        );
+    }
+}

@@ -78,6 +78,7 @@ fn json_is_one_object_on_the_last_line_with_the_stable_fields() {
         "pair_collisions",
         "wall_collisions",
         "max_overlap",
+        "max_wall_penetration",
         "state_hash",
     ] {
         assert!(json.get(field).is_some(), "missing {field} in {last}");

@@ -38,6 +38,30 @@ fn mpi_at_1_2_3_and_4_ranks_gives_the_serial_hash() {
 }
 
 #[test]
+fn mpi_gives_the_serial_hash_for_a_pile_resting_under_gravity() {
+    let scene = "experiments/scenes/granular-pile.toml";
+    let serial = summary(&["simulate", scene, "--steps", "3000"]);
+    assert!(serial["max_wall_penetration"].as_f64().unwrap() > 0.0);
+    for ranks in ["2", "3"] {
+        let mpi = summary(&[
+            "simulate",
+            scene,
+            "--steps",
+            "3000",
+            "--backend",
+            "mpi",
+            "--ranks",
+            ranks,
+        ]);
+        assert_eq!(mpi["state_hash"], serial["state_hash"], "{ranks} ranks");
+        assert_eq!(
+            mpi["max_wall_penetration"], serial["max_wall_penetration"],
+            "{ranks} ranks"
+        );
+    }
+}
+
+#[test]
 fn mpi_dump_is_written_by_rank_0_in_id_order() {
     let dir = tempfile::tempdir().unwrap();
     let serial_csv = dir.path().join("serial.csv");

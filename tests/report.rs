@@ -56,6 +56,7 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         pair_collisions: 1734,
         wall_collisions: 182,
         max_overlap: 0.138,
+        max_wall_penetration: 0.0,
         state_hash: "51a3e11e31576e81".into(),
         method: "step".into(),
         observe: "timing".into(),
@@ -383,6 +384,7 @@ fn accuracy_records() -> Vec<Record> {
             record.wall_s = wall_s * (1.0 + 4.0 * packing);
             record.missed_collision_fraction = missed;
             record.max_overlap = dt.min(1.0);
+            record.max_wall_penetration = 2.0 * dt;
             record.compressibility_z = (1.0 + 4.0 * packing) * z_factor;
             record.collision_rate = (0.1 + packing) * z_factor;
             out.push(record);
@@ -431,11 +433,16 @@ fn the_accuracy_report_tabulates_errors_and_draws_the_pareto_and_stability_figur
     assert!(text.starts_with("# Accuracy report"), "{text}");
     assert!(text.contains("### Packing 0.40"), "{text}");
     // dt = 0.1 at packing 0.4: simulated time 10 in 0.03·2.6 s, Z = 2.6·0.95 against 2.6
-    // (a −5% error), and it fails (4e-3 missed > 1e-3).
+    // (a −5% error), and it fails (4e-3 missed > 1e-3) and goes 0.2 r into the walls
+    // (flagged above 0.1 r).
     assert!(
         text.contains(
-            "| step | 0.1 | 0.100 | 0.0780 | 128.2 | 4.000e7 | **4.00e-3** | 0.100 | 2.4700 | -5.00% |"
+            "| step | 0.1 | 0.100 | 0.0780 | 128.2 | 4.000e7 | **4.00e-3** | 0.100 | **0.200** | 2.4700 | -5.00% |"
         ),
+        "{text}"
+    );
+    assert!(
+        text.contains("| 2.00e-4 | 0.010 | 0.020 | 2.5870 |"),
         "{text}"
     );
     assert!(

@@ -9,7 +9,7 @@
 //! contacts with no ghost and no exported disk are the rank's alone and resolved there,
 //! in canonical order. Every other chain may span ranks: its contacts (with both
 //! disks' states) are gathered on every rank, which resolve them all in canonical
-//! order and keep the velocities of their own disks. So every chain sees its contacts
+//! order and keep the new state of their own disks. So every chain sees its contacts
 //! in the serial order, which is why the bits agree.
 
 use std::collections::HashMap;
@@ -21,15 +21,13 @@ use crate::backend::{
     Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
     summarize, timed,
 };
-use crate::sim::collision::{PairSide, collide_pair};
 use crate::sim::grid::{Contact, Entry, StripGrid, StripLayout, receive_band, refresh_band};
 use crate::sim::neighbours::{PairList, Skin};
 use crate::sim::observe::observe;
 use crate::sim::particles::PACKED_LEN;
+use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::ContactSchedule;
-use crate::sim::step::{
-    FIRST_BUILDS_SINCE_REORDER, REORDER_INTERVAL, advance_disks, resolve_in_order,
-};
+use crate::sim::step::{FIRST_BUILDS_SINCE_REORDER, REORDER_INTERVAL, advance_disks};
 use crate::sim::{Boundary, Particles, StepCounters};
 use crate::spec::RunSpec;
 
@@ -71,6 +69,7 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         c.overlap_sum,
         c.virial,
         seconds.cpu.unwrap_or(f64::NAN),
+        c.max_wall_penetration,
     ];
     let all_figures = comm.all_gather(&figures);
     if comm.rank() != 0 {
@@ -90,6 +89,7 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
             pair_collisions: f[0] as u64,
             wall_collisions: f[1] as u64,
             max_overlap: f[2],
+            max_wall_penetration: f[11],
             overlap_sum: f[8],
             virial: f[9],
         });
@@ -253,13 +253,13 @@ impl RankState {
     fn step<C: Communicator>(&mut self, comm: &C, dt: f64) {
         let mut stages = self.stages;
         timed(&mut stages.integration, || {
-            let hits = advance_disks(
+            let walls = advance_disks(
                 &self.domain,
                 &self.physics,
                 dt,
                 self.particles.disk_slices_mut(),
             );
-            self.counters.wall_collisions += hits;
+            self.counters.merge(&walls);
         });
         // Every rank rebuilds its list when any disk moved half the skin: the ghosts it
         // lists are another rank's disks. Between builds disks stay with the rank that
@@ -286,12 +286,12 @@ impl RankState {
         timed(&mut stages.broad_phase, || {
             self.find_contacts(&ghosts, rebuild)
         });
-        timed(&mut stages.collisions, || self.resolve_own_chains());
+        timed(&mut stages.collisions, || self.resolve_own_chains(dt));
         let shared = timed(&mut stages.communication, || {
             comm.all_gather(&self.pack_shared())
         });
         timed(&mut stages.collisions, || {
-            self.resolve_shared_chains(&shared)
+            self.resolve_shared_chains(&shared, dt)
         });
         self.stages = stages;
     }
@@ -427,14 +427,15 @@ impl RankState {
         self.contacts.sort_unstable_by_key(|contact| contact.key);
     }
 
-    fn resolve_own_chains(&mut self) {
-        let e = self.physics.restitution;
-        resolve_in_order(
+    fn resolve_own_chains(&mut self, dt: f64) {
+        resolve_contacts(
             &mut self.particles,
             &self.domain,
-            e,
+            &self.physics,
+            dt,
             &self.contacts,
             &mut self.counters,
+            |_| {},
         );
     }
 
@@ -450,46 +451,35 @@ impl RankState {
     }
 
     /// Resolves the shared contacts of all ranks in canonical order (the same work on
-    /// every rank), keeps the velocities of this rank's disks, and drops the ghosts.
-    fn resolve_shared_chains(&mut self, shared: &[Vec<f64>]) {
-        // Packed records by id: [id, x, y, vx, vy, radius, mass], velocities updated in place.
-        let mut disks: HashMap<u32, [f64; PACKED_LEN]> = HashMap::new();
-        let mut pairs: Vec<(u32, u32)> = Vec::new();
+    /// every rank), keeps the new state of this rank's disks, and drops the ghosts.
+    fn resolve_shared_chains(&mut self, shared: &[Vec<f64>], dt: f64) {
+        // The shared disks, once each, stored locally; the pairs by local index.
+        let mut disks = Particles::default();
+        let mut slot_of: HashMap<u32, u32> = HashMap::new();
+        let mut contacts: Vec<Contact> = Vec::new();
         for packed in shared {
             for pair in packed.chunks_exact(2 * PACKED_LEN) {
                 let (a, b) = pair.split_at(PACKED_LEN);
-                for record in [a, b] {
-                    let record: [f64; PACKED_LEN] = record.try_into().expect("one record");
-                    disks.entry(record[0] as u32).or_insert(record);
-                }
-                pairs.push((a[0] as u32, b[0] as u32));
+                let [slot_a, slot_b] = [a, b].map(|record| {
+                    *slot_of.entry(record[0] as u32).or_insert_with(|| {
+                        disks.unpack_append(record);
+                        (disks.len() - 1) as u32
+                    })
+                });
+                contacts.push(Contact::new(&disks, slot_a as usize, slot_b as usize));
             }
         }
-        pairs.sort_unstable();
-        let e = self.physics.restitution;
-        for (a, b) in pairs {
-            let [_, xa, ya, vxa, vya, ra, ma] = disks[&a];
-            let [_, xb, yb, vxb, vyb, rb, mb] = disks[&b];
-            let (dx, dy) = self.domain.separation(xa, ya, xb, yb);
-            let side_a = PairSide {
-                mass: ma,
-                vx: vxa,
-                vy: vya,
-            };
-            let side_b = PairSide {
-                mass: mb,
-                vx: vxb,
-                vy: vyb,
-            };
-            let (outcome, velocities) = collide_pair(e, dx, dy, ra + rb, side_a, side_b);
-            self.shared_counters.record(outcome);
-            if let Some([after_a, after_b]) = velocities {
-                for (id, [vx, vy]) in [(a, after_a), (b, after_b)] {
-                    let record = disks.get_mut(&id).expect("every shared disk was unpacked");
-                    (record[3], record[4]) = (vx, vy);
-                }
-            }
-        }
+        // Canonical order: every rank resolves the same list the same way.
+        contacts.sort_unstable_by_key(|contact| contact.key);
+        resolve_contacts(
+            &mut disks,
+            &self.domain,
+            &self.physics,
+            dt,
+            &contacts,
+            &mut self.shared_counters,
+            |_| {},
+        );
         // Own disks in shared chains: those in this rank's shared contacts, and exported
         // ones, which another rank's contacts may hold.
         let n_own = self.n_own;
@@ -507,10 +497,12 @@ impl RankState {
                 own_slots.insert(self.particles.id[idx], idx);
             }
         }
-        for (id, record) in &disks {
+        for (slot, id) in disks.id.iter().enumerate() {
             if let Some(&idx) = own_slots.get(id) {
-                self.particles.vx[idx] = record[3];
-                self.particles.vy[idx] = record[4];
+                self.particles.x[idx] = disks.x[slot];
+                self.particles.y[idx] = disks.y[slot];
+                self.particles.vx[idx] = disks.vx[slot];
+                self.particles.vy[idx] = disks.vy[slot];
             }
         }
         self.particles.truncate(n_own);
@@ -572,6 +564,25 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    #[test]
+    fn ranks_as_threads_give_the_serial_hash_for_a_pile_resting_under_gravity() {
+        let mut spec = spec(Boundary::Walls, 0.5, 0.3);
+        if let SceneSource::Gas(gas) = &mut spec.scene {
+            gas.physics.gravity = Some([0.0, -1.0]);
+        }
+        spec.method = MethodSpec::stepped(0.05, 600, Broadphase::Grid);
+        let reference = serial::run(&spec).unwrap().summary;
+        assert!(reference.max_wall_penetration > 0.0);
+        for ranks in [2, 4] {
+            let summary = run_on_threads(&spec, ranks).summary;
+            assert_eq!(summary.state_hash, reference.state_hash, "{ranks} ranks");
+            assert_eq!(
+                summary.max_wall_penetration, reference.max_wall_penetration,
+                "{ranks} ranks"
+            );
         }
     }
 

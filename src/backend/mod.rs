@@ -332,6 +332,7 @@ pub fn summarize(
         pair_collisions: measured.counters.pair_collisions,
         wall_collisions: measured.counters.wall_collisions,
         max_overlap: measured.counters.max_overlap,
+        max_wall_penetration: measured.counters.max_wall_penetration,
         state_hash: state_hash(last),
         method: prepared.method.name().to_owned(),
         observe: prepared.observe.name().to_owned(),

@@ -19,17 +19,16 @@ use crate::backend::{
     Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
     summarize, timed,
 };
-use crate::sim::collision::{PairSide, collide_pair};
+use crate::sim::collision::DiskState;
 use crate::sim::grid::{
     Contact, Entry, StripGrid, find_contacts_all_pairs_from, number_slots, receive_band,
     refresh_band,
 };
 use crate::sim::neighbours::{PairList, Skin};
 use crate::sim::observe::observe;
+use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::ContactSchedule;
-use crate::sim::step::{
-    FIRST_BUILDS_SINCE_REORDER, REORDER_INTERVAL, advance_disks, resolve_in_order,
-};
+use crate::sim::step::{FIRST_BUILDS_SINCE_REORDER, REORDER_INTERVAL, advance_disks};
 use crate::sim::{Broadphase, DiskSlices, Domain, Particles, Physics, StepCounters, StepParams};
 use crate::spec::RunSpec;
 
@@ -167,7 +166,7 @@ impl ThreadedStepper {
             vy,
             radius,
         } = particles.disk_slices_mut();
-        let hits: u64 = x
+        let walls = x
             .par_chunks_mut(chunk)
             .zip(y.par_chunks_mut(chunk))
             .zip(vx.par_chunks_mut(chunk))
@@ -187,8 +186,12 @@ impl ThreadedStepper {
                     },
                 )
             })
-            .sum();
-        self.counters.wall_collisions += hits;
+            // Counts and maxima only: the same totals in any order.
+            .reduce(StepCounters::default, |mut a, b| {
+                a.merge(&b);
+                a
+            });
+        self.counters.merge(&walls);
     }
 
     fn find_contacts(&mut self, particles: &mut Particles) {
@@ -349,27 +352,40 @@ impl ThreadedStepper {
     }
 
     fn resolve_contacts(&mut self, particles: &mut Particles) {
-        let (domain, e) = (&self.domain, self.physics.restitution);
+        let (domain, physics, dt) = (&self.domain, &self.physics, self.params.dt);
         let n_lists = self.contacts.len();
         if n_lists == 1 {
-            resolve_in_order(particles, domain, e, &self.contacts[0], &mut self.counters);
+            resolve_contacts(
+                particles,
+                domain,
+                physics,
+                dt,
+                &self.contacts[0],
+                &mut self.counters,
+                |_| {},
+            );
         } else {
-            let view = VelocityView::new(particles);
+            let shared = SharedDisks::new(particles);
             let band_counters = self.contacts[..n_lists]
                 .par_iter()
                 .map(|contacts| {
+                    // SAFETY: after `ContactSchedule::split`, a band's list holds only
+                    // whole chains with no disk in any band's first strip. A band's pairs
+                    // touch disks of its own strips and of the next band's first strip,
+                    // so these chains' disks belong to this band's strips and to no other
+                    // band's pairs: two bands never hold contacts of the same disk, and
+                    // resolution touches only the disks of its contacts.
+                    let mut disks = unsafe { shared.claim() };
                     let mut counters = StepCounters::default();
-                    for contact in contacts {
-                        // SAFETY: after `ContactSchedule::split`, a band's list holds only
-                        // chains with no disk in any band's first strip. A band's pairs
-                        // touch disks of its own strips and of the next band's first
-                        // strip, so these chains' disks belong to this band's strips
-                        // and to no other band's pairs: two bands never hold contacts of
-                        // the same disk. Each disk's velocity is therefore read and
-                        // written by one thread only; positions, radii and masses are
-                        // only read.
-                        counters.record(unsafe { view.resolve(domain, e, contact) });
-                    }
+                    resolve_contacts(
+                        &mut disks,
+                        domain,
+                        physics,
+                        dt,
+                        contacts,
+                        &mut counters,
+                        |_| {},
+                    );
                     counters
                 })
                 .reduce(StepCounters::default, |mut a, b| {
@@ -377,7 +393,15 @@ impl ThreadedStepper {
                     a
                 });
             self.counters.merge(&band_counters);
-            resolve_in_order(particles, domain, e, &self.crossing, &mut self.counters);
+            resolve_contacts(
+                particles,
+                domain,
+                physics,
+                dt,
+                &self.crossing,
+                &mut self.counters,
+                |_| {},
+            );
         }
     }
 }
@@ -397,24 +421,24 @@ fn split_into_bands<'a>(
     slices
 }
 
-/// Shared read access to every disk and write access to velocities through raw
-/// pointers, for bands that resolve disjoint chains of contacts at once.
+/// Every disk's state through raw pointers, for bands that resolve disjoint chains of
+/// contacts at once. Radii and masses are only read.
 #[derive(Clone, Copy)]
-struct VelocityView<'a> {
-    x: &'a [f64],
-    y: &'a [f64],
+struct SharedDisks<'a> {
     radius: &'a [f64],
     mass: &'a [f64],
+    x: *mut f64,
+    y: *mut f64,
     vx: *mut f64,
     vy: *mut f64,
 }
 
 // SAFETY: the raw pointers come from a `&mut Particles` borrowed for the view's whole
-// life; `VelocityView::resolve` states the rule that makes concurrent use sound.
-unsafe impl Send for VelocityView<'_> {}
-unsafe impl Sync for VelocityView<'_> {}
+// life; `SharedDisks::claim` states the rule that makes concurrent use sound.
+unsafe impl Send for SharedDisks<'_> {}
+unsafe impl Sync for SharedDisks<'_> {}
 
-impl<'a> VelocityView<'a> {
+impl<'a> SharedDisks<'a> {
     fn new(particles: &'a mut Particles) -> Self {
         let Particles {
             x,
@@ -425,48 +449,65 @@ impl<'a> VelocityView<'a> {
             mass,
             ..
         } = particles;
-        VelocityView {
-            x,
-            y,
+        SharedDisks {
             radius,
             mass,
+            x: x.as_mut_ptr(),
+            y: y.as_mut_ptr(),
             vx: vx.as_mut_ptr(),
             vy: vy.as_mut_ptr(),
         }
     }
 
-    /// Resolves one contact with the shared impulse law.
+    /// A handle for one worker's contact resolution.
     ///
     /// # Safety
-    /// While this runs, no other thread may read or write the velocities of disks
-    /// `contact.a` and `contact.b`. Both indices are in bounds (they index `x`).
-    #[inline]
-    unsafe fn resolve(
-        &self,
-        domain: &Domain,
-        restitution: f64,
-        contact: &Contact,
-    ) -> crate::sim::collision::ContactOutcome {
-        let (a, b) = (contact.a as usize, contact.b as usize);
-        let (dx, dy) = domain.separation(self.x[a], self.y[a], self.x[b], self.y[b]);
-        // SAFETY: a and b index `x`, which has the length of `vx` and `vy`; the caller
-        // guarantees that no other thread touches these two disks' velocities.
+    /// While the handle lives, no other thread may read or write the position or
+    /// velocity of a disk that this handle is used to access, and the handle is used only
+    /// with storage indices in bounds (below the number of disks).
+    unsafe fn claim(&self) -> ChainDisks<'a> {
+        ChainDisks(*self)
+    }
+}
+
+/// One worker's access to the disks of its chains ([`SharedDisks::claim`]).
+struct ChainDisks<'a>(SharedDisks<'a>);
+
+// SAFETY (every method): `idx` is in bounds and the disk is this worker's alone, as
+// `SharedDisks::claim` requires; `radius` has the length of the pointed-to arrays.
+impl DiskState for ChainDisks<'_> {
+    #[inline(always)]
+    fn position(&self, idx: usize) -> [f64; 2] {
+        assert!(idx < self.0.radius.len());
+        unsafe { [*self.0.x.add(idx), *self.0.y.add(idx)] }
+    }
+    #[inline(always)]
+    fn velocity(&self, idx: usize) -> [f64; 2] {
+        assert!(idx < self.0.radius.len());
+        unsafe { [*self.0.vx.add(idx), *self.0.vy.add(idx)] }
+    }
+    #[inline(always)]
+    fn radius(&self, idx: usize) -> f64 {
+        self.0.radius[idx]
+    }
+    #[inline(always)]
+    fn mass(&self, idx: usize) -> f64 {
+        self.0.mass[idx]
+    }
+    #[inline(always)]
+    fn set_position(&mut self, idx: usize, [x, y]: [f64; 2]) {
+        assert!(idx < self.0.radius.len());
         unsafe {
-            let side = |idx: usize| PairSide {
-                mass: self.mass[idx],
-                vx: *self.vx.add(idx),
-                vy: *self.vy.add(idx),
-            };
-            let contact_distance = self.radius[a] + self.radius[b];
-            let (outcome, velocities) =
-                collide_pair(restitution, dx, dy, contact_distance, side(a), side(b));
-            if let Some([[vax, vay], [vbx, vby]]) = velocities {
-                *self.vx.add(a) = vax;
-                *self.vy.add(a) = vay;
-                *self.vx.add(b) = vbx;
-                *self.vy.add(b) = vby;
-            }
-            outcome
+            *self.0.x.add(idx) = x;
+            *self.0.y.add(idx) = y;
+        }
+    }
+    #[inline(always)]
+    fn set_velocity(&mut self, idx: usize, [vx, vy]: [f64; 2]) {
+        assert!(idx < self.0.radius.len());
+        unsafe {
+            *self.0.vx.add(idx) = vx;
+            *self.0.vy.add(idx) = vy;
         }
     }
 }

@@ -116,35 +116,75 @@ pub fn collide_pair(
     (outcome, Some(velocities))
 }
 
+/// Read and write access to the disks a contact resolution touches, by storage index.
+///
+/// [`Particles`] is the plain implementation; a parallel backend may implement it on a
+/// view that lets several workers resolve disjoint chains of contacts at once. Masses and
+/// radii are only read.
+pub trait DiskState {
+    fn position(&self, idx: usize) -> [f64; 2];
+    fn velocity(&self, idx: usize) -> [f64; 2];
+    fn radius(&self, idx: usize) -> f64;
+    fn mass(&self, idx: usize) -> f64;
+    fn set_position(&mut self, idx: usize, position: [f64; 2]);
+    fn set_velocity(&mut self, idx: usize, velocity: [f64; 2]);
+}
+
+impl DiskState for Particles {
+    #[inline(always)]
+    fn position(&self, idx: usize) -> [f64; 2] {
+        [self.x[idx], self.y[idx]]
+    }
+    #[inline(always)]
+    fn velocity(&self, idx: usize) -> [f64; 2] {
+        [self.vx[idx], self.vy[idx]]
+    }
+    #[inline(always)]
+    fn radius(&self, idx: usize) -> f64 {
+        self.radius[idx]
+    }
+    #[inline(always)]
+    fn mass(&self, idx: usize) -> f64 {
+        self.mass[idx]
+    }
+    #[inline(always)]
+    fn set_position(&mut self, idx: usize, [x, y]: [f64; 2]) {
+        self.x[idx] = x;
+        self.y[idx] = y;
+    }
+    #[inline(always)]
+    fn set_velocity(&mut self, idx: usize, [vx, vy]: [f64; 2]) {
+        self.vx[idx] = vx;
+        self.vy[idx] = vy;
+    }
+}
+
 /// Resolves the pair stored at `a` and `b` with [`collide_pair`]. `a` must be the disk
 /// with the lower id: the orientation is part of the canonical order that makes results
 /// reproducible.
 #[inline]
-pub fn resolve_contact(
-    particles: &mut Particles,
+pub fn resolve_contact<S: DiskState>(
+    disks: &mut S,
     domain: &Domain,
     restitution: f64,
     a: usize,
     b: usize,
 ) -> ContactOutcome {
-    let (dx, dy) = domain.separation(
-        particles.x[a],
-        particles.y[a],
-        particles.x[b],
-        particles.y[b],
-    );
-    let side = |idx: usize| PairSide {
-        mass: particles.mass[idx],
-        vx: particles.vx[idx],
-        vy: particles.vy[idx],
+    let ([xa, ya], [xb, yb]) = (disks.position(a), disks.position(b));
+    let (dx, dy) = domain.separation(xa, ya, xb, yb);
+    let side = |idx: usize| {
+        let [vx, vy] = disks.velocity(idx);
+        PairSide {
+            mass: disks.mass(idx),
+            vx,
+            vy,
+        }
     };
-    let contact = particles.radius[a] + particles.radius[b];
+    let contact = disks.radius(a) + disks.radius(b);
     let (outcome, velocities) = collide_pair(restitution, dx, dy, contact, side(a), side(b));
-    if let Some([[vax, vay], [vbx, vby]]) = velocities {
-        particles.vx[a] = vax;
-        particles.vy[a] = vay;
-        particles.vx[b] = vbx;
-        particles.vy[b] = vby;
+    if let Some([after_a, after_b]) = velocities {
+        disks.set_velocity(a, after_a);
+        disks.set_velocity(b, after_b);
     }
     outcome
 }

@@ -503,7 +503,6 @@ impl StripGrid {
                 // Own strip: the disks to the right within reach.
                 let right = |b: &Entry| b.x - a.x < reach;
                 let own = &own_entries[pos + 1..];
-                sink.prepare(OWN_WINDOW + NORTH_WINDOW);
                 let rest = match own.split_first_chunk::<OWN_WINDOW>() {
                     Some((window, rest)) => {
                         for b in window {
@@ -518,7 +517,6 @@ impl StripGrid {
                     None => own,
                 };
                 for b in rest.iter().take_while(|b| right(b)) {
-                    sink.prepare(1);
                     sink.offer(within(a, b), a, b);
                 }
                 // North strip: the disks within reach on either side.
@@ -543,7 +541,6 @@ impl StripGrid {
                     None => north,
                 };
                 for b in rest.iter().take_while(|b| left(b)) {
-                    sink.prepare(1);
                     sink.offer(within(a, b), a, b);
                 }
                 if PERIODIC {
@@ -553,14 +550,12 @@ impl StripGrid {
                             .iter()
                             .take_while(|b| b.x + width - a.x < reach)
                         {
-                            sink.prepare(1);
                             sink.offer(within(a, b), a, b);
                         }
                         for b in north_entries
                             .iter()
                             .take_while(|b| b.x + width < a.x + reach)
                         {
-                            sink.prepare(1);
                             sink.offer(within(a, b), a, b);
                         }
                     }
@@ -570,7 +565,6 @@ impl StripGrid {
                             .rev()
                             .take_while(|b| b.x - width > a.x - reach)
                         {
-                            sink.prepare(1);
                             sink.offer(within(a, b), a, b);
                         }
                     }
@@ -588,9 +582,6 @@ const NORTH_WINDOW: usize = 4;
 /// Where the scan's candidate pairs go: `offer` is called for every candidate, with
 /// whether it passed the test.
 trait Sink {
-    /// Called before the candidates of one disk, at most `n_candidates` of them without
-    /// another call.
-    fn prepare(&mut self, n_candidates: usize);
     fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry);
 }
 
@@ -601,9 +592,6 @@ struct ContactSink<'a> {
 }
 
 impl Sink for ContactSink<'_> {
-    #[inline(always)]
-    fn prepare(&mut self, _: usize) {}
-
     #[inline(always)]
     fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry) {
         if accepted {
@@ -622,16 +610,13 @@ struct PairSink<'a> {
 
 impl Sink for PairSink<'_> {
     #[inline(always)]
-    fn prepare(&mut self, n_candidates: usize) {
-        self.pairs.reserve(n_candidates);
-    }
-
-    #[inline(always)]
     fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry) {
+        if self.pairs.len() == self.pairs.capacity() {
+            self.pairs.reserve(1024);
+        }
         let len = self.pairs.len();
-        debug_assert!(len < self.pairs.capacity());
-        // SAFETY: `prepare` left room for every candidate of this disk, so there is room
-        // at `len`; the length grows over it only when it was written.
+        // SAFETY: the check above leaves room for one more element at `len`; the length
+        // grows over it only when it was written.
         unsafe {
             self.pairs.as_mut_ptr().add(len).write([a.idx, b.idx]);
             self.pairs.set_len(len + usize::from(accepted));

@@ -13,6 +13,7 @@ pub mod neighbours;
 pub mod observe;
 pub mod particles;
 pub mod pilot;
+pub mod resolve;
 pub mod scene;
 pub mod schedule;
 pub mod step;

@@ -8,10 +8,11 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::collision::{ContactOutcome, resolve_contact};
+use super::collision::ContactOutcome;
 use super::grid::{Contact, StripGrid, find_contacts_all_pairs};
 use super::neighbours::{PairList, Skin};
 use super::particles::{DiskSlices, Particles};
+use super::resolve::resolve_contacts;
 use super::scene::{Boundary, Domain, Physics, Scene, wrap_periodic};
 
 /// Grid builds between re-storings of the disks in grid order.
@@ -57,6 +58,9 @@ pub struct StepCounters {
     pub wall_collisions: u64,
     /// Largest overlap seen, as a fraction of the pair's contact distance.
     pub max_overlap: f64,
+    /// Largest penetration of a disk into a wall seen after a move, as a fraction of
+    /// its radius (0 with periodic boundaries).
+    pub max_wall_penetration: f64,
     /// Σ overlap fraction over the pairs that received an impulse (for the mean overlap).
     pub overlap_sum: f64,
     /// Σ d·J over the impulses applied: the collision virial (for the pressure).
@@ -126,13 +130,13 @@ impl Stepper {
 
     /// Moves every disk by one dt and applies the boundary ([`advance_disks`]).
     pub fn advance(&mut self, particles: &mut Particles) {
-        let hits = advance_disks(
+        let walls = advance_disks(
             &self.domain,
             &self.physics,
             self.params.dt,
             particles.disk_slices_mut(),
         );
-        self.counters.wall_collisions += hits;
+        self.counters.merge(&walls);
     }
 
     /// Finds every overlapping pair and puts them in canonical order. May change the
@@ -206,68 +210,29 @@ impl Stepper {
         self.skin.record(particles);
     }
 
-    /// Applies the impulse law to each found pair, in canonical order.
+    /// Resolves the found pairs ([`resolve_contacts`]).
     pub fn resolve_contacts(&mut self, particles: &mut Particles) {
         self.resolve_contacts_noting(particles, |_| {});
     }
 
     /// [`Stepper::resolve_contacts`], calling `collided` with the key
-    /// ([`Contact::key`]) of every pair that received an impulse: the accuracy observer
-    /// (`sim::observe::MissedCollisions`) compares them with the pairs that met.
+    /// ([`Contact::key`]) of every pair that received an impulse of the first pass: the
+    /// accuracy observer (`sim::observe::MissedCollisions`) compares them with the pairs
+    /// that met.
     pub fn resolve_contacts_noting(
         &mut self,
         particles: &mut Particles,
-        mut collided: impl FnMut(u64),
+        collided: impl FnMut(u64),
     ) {
-        let e = self.physics.restitution;
-        let counters = &mut self.counters;
-        resolve_in_order_with(
+        resolve_contacts(
             particles,
             &self.domain,
-            e,
+            &self.physics,
+            self.params.dt,
             &self.contacts,
-            |contact, outcome| {
-                counters.record(outcome);
-                if outcome.collided {
-                    collided(contact.key);
-                }
-            },
+            &mut self.counters,
+            collided,
         );
-    }
-}
-
-/// Resolves `contacts` one after another, in the order given, and counts what happened.
-pub fn resolve_in_order(
-    particles: &mut Particles,
-    domain: &Domain,
-    restitution: f64,
-    contacts: &[Contact],
-    counters: &mut StepCounters,
-) {
-    resolve_in_order_with(particles, domain, restitution, contacts, |_, outcome| {
-        counters.record(outcome)
-    });
-}
-
-/// Resolves `contacts` one after another, in the order given, handing each outcome to
-/// `on_outcome`.
-#[inline(always)]
-fn resolve_in_order_with(
-    particles: &mut Particles,
-    domain: &Domain,
-    restitution: f64,
-    contacts: &[Contact],
-    mut on_outcome: impl FnMut(&Contact, ContactOutcome),
-) {
-    for contact in contacts {
-        let outcome = resolve_contact(
-            particles,
-            domain,
-            restitution,
-            contact.a as usize,
-            contact.b as usize,
-        );
-        on_outcome(contact, outcome);
     }
 }
 
@@ -288,6 +253,7 @@ impl StepCounters {
         self.pair_collisions += other.pair_collisions;
         self.wall_collisions += other.wall_collisions;
         self.max_overlap = self.max_overlap.max(other.max_overlap);
+        self.max_wall_penetration = self.max_wall_penetration.max(other.max_wall_penetration);
         self.overlap_sum += other.overlap_sum;
         self.virial += other.virial;
     }
@@ -297,8 +263,14 @@ impl StepCounters {
 /// seed's equations 8–9, x += v·dt, without a field; velocity Verlet, equations 6–7,
 /// with a constant one), then reflect those that touch a wall while moving outward, or
 /// wrap periodic ones. No disk's update reads another's, so chunks can go in any order
-/// or in parallel. Returns the wall reflections.
-pub fn advance_disks(domain: &Domain, physics: &Physics, dt: f64, disks: DiskSlices<'_>) -> u64 {
+/// or in parallel. Returns what the walls saw: the reflections and the deepest
+/// penetration (the other counters are zero).
+pub fn advance_disks(
+    domain: &Domain,
+    physics: &Physics,
+    dt: f64,
+    disks: DiskSlices<'_>,
+) -> StepCounters {
     let DiskSlices {
         x,
         y,
@@ -324,12 +296,13 @@ pub fn advance_disks(domain: &Domain, physics: &Physics, dt: f64, disks: DiskSli
             for y in y.iter_mut() {
                 *y = wrap_periodic(*y, domain.height);
             }
-            0
+            StepCounters::default()
         }
         Boundary::Walls => {
             let e = physics.wall_restitution;
-            reflect_at_walls(x, vx, radius, domain.width, e)
-                + reflect_at_walls(y, vy, radius, domain.height, e)
+            let mut walls = reflect_at_walls(x, vx, radius, domain.width, e);
+            walls.merge(&reflect_at_walls(y, vy, radius, domain.height, e));
+            walls
         }
     }
 }
@@ -350,24 +323,27 @@ fn accelerate(positions: &mut [f64], velocities: &mut [f64], acceleration: f64, 
 }
 
 /// Reflects, along one axis, the disks that touch the wall at 0 or at `length` and move
-/// towards it. Returns how many it reflected.
+/// towards it. Returns how many it reflected and the deepest penetration.
 fn reflect_at_walls(
     positions: &[f64],
     velocities: &mut [f64],
     radii: &[f64],
     length: f64,
     wall_restitution: f64,
-) -> u64 {
-    let reflect = |p: f64, v: &mut f64, r: f64| {
+) -> StepCounters {
+    let mut deepest = 0.0_f64;
+    let mut reflect = |p: f64, v: &mut f64, r: f64| {
         let outward = (p - r < 0.0 && *v < 0.0) || (p + r > length && *v > 0.0);
         if outward {
             *v *= -wall_restitution;
         }
+        deepest = deepest.max((r - p).max(p + r - length) / r);
         u64::from(outward)
     };
     // Few disks touch a wall in any step: a branch-free test of four disks at a time
     // (it vectorises) finds the groups with one near a wall, and only those are looked
-    // at one by one. The branch is almost never taken, so it is well predicted.
+    // at one by one. The branch is almost never taken, so it is well predicted. A disk
+    // not near a wall is not in it: its penetration is negative and cannot be deepest.
     let mut hits = 0;
     let mut positions4 = positions.chunks_exact(4);
     let mut velocities4 = velocities.chunks_exact_mut(4);
@@ -390,7 +366,11 @@ fn reflect_at_walls(
     for ((&p, v), &r) in rest.zip(radii4.remainder()) {
         hits += reflect(p, v, r);
     }
-    hits
+    StepCounters {
+        wall_collisions: hits,
+        max_wall_penetration: deepest,
+        ..StepCounters::default()
+    }
 }
 
 /// The largest dt for which the fastest disk moves at most `fraction` of the smallest

@@ -1,0 +1,191 @@
+//! Contact resolution within one step: the one function the serial stepper and every
+//! parallel backend call on a canonical list of contacts (all of a step's contacts, or
+//! whole chains of them, `sim::schedule`). It leaves out finding the contacts.
+//!
+//! Without a field, a step gives each overlapping, approaching pair one impulse, in
+//! canonical order: the seed's method, kept bit for bit.
+//!
+//! With gravity, disks rest on each other and on the walls, and one pass is not enough:
+//! each step the floor turns back only the bottom disk, the impulses above push it down
+//! again, and a stack sinks through the floor at the rate of its weight. So, as the
+//! sequential-impulse solvers of Box2D and Rapier do, the step then
+//! 1. iterates Gauss–Seidel sweeps of inelastic impulses over the same contacts, in the
+//!    same canonical order, with the walls as contacts too (a disk of the list that
+//!    touches a wall and moves into it is stopped), until a sweep applies no impulse or
+//!    [`MAX_SWEEPS`] sweeps are done; restitution is for impacts, which the first pass
+//!    has already given, so the sweeps that make contacts hold use none (Box2D likewise
+//!    drops restitution below a threshold speed);
+//! 2. projects positions: a pair overlapping by more than the slop is pushed apart along
+//!    its normal (split by inverse mass, so the centre of mass stays), then a disk of the
+//!    list inside a wall by more than the slop is put back at the slop ([`SLOP`]), as
+//!    Box2D's position solver does. The velocity sweeps alone cannot undo the sinking
+//!    that gravity adds within a step; without the projection it accumulates.
+//!
+//! Determinism: a chain of contacts sharing disks is independent of every other chain,
+//! and a sweep that applies no impulse to a chain leaves it unchanged. So sweeping all
+//! contacts until none applies an impulse (or the cap is reached) gives the same bits as
+//! sweeping each chain on its own: a backend may call this on any union of whole chains.
+
+use super::collision::{ContactOutcome, DiskState, resolve_contact};
+use super::grid::Contact;
+use super::scene::{Boundary, Domain, Physics, wrap_periodic};
+use super::step::StepCounters;
+
+/// Most resting-contact sweeps per step (Box2D defaults to 8 velocity iterations; a
+/// narrow pile under gravity needs more to hold its bottom disks within the slop).
+/// Gauss–Seidel converges slowly along a tall stack (a few per cent per sweep for 20
+/// disks), so a deep pile uses them all; what is left is small, and the position
+/// projection and the next step's sweeps take it up.
+pub const MAX_SWEEPS: u32 = 32;
+
+/// Overlap left uncorrected by the position projection: a fraction of the pair's
+/// contact distance `r_a + r_b`, or of the radius for a wall. Leaving a sliver keeps
+/// resting contacts touching, so the sweeps see them every step (Box2D's linear slop).
+pub const SLOP: f64 = 0.005;
+
+/// A sweep impulse is applied only above this approach speed, as a fraction of `|g|·dt`
+/// (the speed the field adds in one step): rounding noise below it would otherwise keep
+/// every sweep busy until the cap.
+const SWEEP_TOLERANCE: f64 = 1e-3;
+
+/// Resolves `contacts` (in canonical order, [`Contact::key`]) for one step of `dt`:
+/// one pass of pair impulses with the scene's restitution, calling `collided` with the
+/// key of each pair that received one; then, with gravity, resting contact (module
+/// docs). Counts into `counters`.
+pub fn resolve_contacts<S: DiskState>(
+    disks: &mut S,
+    domain: &Domain,
+    physics: &Physics,
+    dt: f64,
+    contacts: &[Contact],
+    counters: &mut StepCounters,
+    mut collided: impl FnMut(u64),
+) {
+    for contact in contacts {
+        let outcome = resolve_contact(
+            disks,
+            domain,
+            physics.restitution,
+            contact.a as usize,
+            contact.b as usize,
+        );
+        counters.record(outcome);
+        if outcome.collided {
+            collided(contact.key);
+        }
+    }
+    if let Some([gx, gy]) = physics.gravity {
+        let tolerance = SWEEP_TOLERANCE * gx.hypot(gy) * dt;
+        for _ in 0..MAX_SWEEPS {
+            if !sweep(disks, domain, contacts, tolerance, counters) {
+                break;
+            }
+        }
+        project(disks, domain, contacts);
+    }
+}
+
+/// One Gauss–Seidel sweep of inelastic impulses: pairs in the order given, then walls.
+/// Returns whether it applied any impulse. The pair impulses add to the virial (they
+/// carry the weight, which the pressure must see); they are not counted as collisions.
+fn sweep<S: DiskState>(
+    disks: &mut S,
+    domain: &Domain,
+    contacts: &[Contact],
+    tolerance: f64,
+    counters: &mut StepCounters,
+) -> bool {
+    let mut applied = false;
+    for contact in contacts {
+        let (a, b) = (contact.a as usize, contact.b as usize);
+        if approach_speed(disks, domain, a, b) > tolerance {
+            let ContactOutcome { virial, .. } = resolve_contact(disks, domain, 0.0, a, b);
+            counters.virial += virial;
+            applied = true;
+        }
+    }
+    if domain.boundary == Boundary::Walls {
+        // Each disk's wall rule reads and writes that disk only, and a second visit finds
+        // it stopped: the order among disks and repeated disks do not matter.
+        for contact in contacts {
+            for idx in [contact.a as usize, contact.b as usize] {
+                applied |= stop_at_walls(disks, domain, idx, tolerance);
+            }
+        }
+    }
+    applied
+}
+
+/// How fast the disks at `a` and `b` approach each other along their line of centres
+/// (negative when they separate), if they overlap; 0 otherwise.
+#[inline]
+fn approach_speed<S: DiskState>(disks: &S, domain: &Domain, a: usize, b: usize) -> f64 {
+    let ([xa, ya], [xb, yb]) = (disks.position(a), disks.position(b));
+    let (dx, dy) = domain.separation(xa, ya, xb, yb);
+    let distance_sq = dx * dx + dy * dy;
+    let contact = disks.radius(a) + disks.radius(b);
+    if distance_sq >= contact * contact || distance_sq == 0.0 {
+        return 0.0;
+    }
+    let ([vax, vay], [vbx, vby]) = (disks.velocity(a), disks.velocity(b));
+    -((vbx - vax) * dx + (vby - vay) * dy) / distance_sq.sqrt()
+}
+
+/// Stops the normal motion of the disk at `idx` into any wall it touches (faster than
+/// `tolerance`). Returns whether it did.
+#[inline]
+fn stop_at_walls<S: DiskState>(disks: &mut S, domain: &Domain, idx: usize, tolerance: f64) -> bool {
+    let (position, mut velocity, r) = (disks.position(idx), disks.velocity(idx), disks.radius(idx));
+    let mut stopped = false;
+    for (axis, length) in [domain.width, domain.height].into_iter().enumerate() {
+        let (p, v) = (position[axis], velocity[axis]);
+        if (p - r < 0.0 && v < -tolerance) || (p + r > length && v > tolerance) {
+            velocity[axis] = 0.0;
+            stopped = true;
+        }
+    }
+    if stopped {
+        disks.set_velocity(idx, velocity);
+    }
+    stopped
+}
+
+/// The position projection: pairs in the order given pushed apart to the slop, then
+/// disks of the list put back inside the walls to the slop.
+fn project<S: DiskState>(disks: &mut S, domain: &Domain, contacts: &[Contact]) {
+    for contact in contacts {
+        let (a, b) = (contact.a as usize, contact.b as usize);
+        let ([xa, ya], [xb, yb]) = (disks.position(a), disks.position(b));
+        let (dx, dy) = domain.separation(xa, ya, xb, yb);
+        let distance = dx.hypot(dy);
+        let contact_distance = disks.radius(a) + disks.radius(b);
+        let excess = contact_distance * (1.0 - SLOP) - distance;
+        if excess <= 0.0 || distance == 0.0 {
+            continue;
+        }
+        let (ma, mb) = (disks.mass(a), disks.mass(b));
+        let (nx, ny) = (dx / distance, dy / distance);
+        let (share_a, share_b) = (excess * mb / (ma + mb), excess * ma / (ma + mb));
+        let place = |x: f64, y: f64| match domain.boundary {
+            Boundary::Walls => [x, y],
+            Boundary::Periodic => [
+                wrap_periodic(x, domain.width),
+                wrap_periodic(y, domain.height),
+            ],
+        };
+        disks.set_position(a, place(xa - nx * share_a, ya - ny * share_a));
+        disks.set_position(b, place(xb + nx * share_b, yb + ny * share_b));
+    }
+    if domain.boundary == Boundary::Walls {
+        for contact in contacts {
+            for idx in [contact.a as usize, contact.b as usize] {
+                let (mut position, r) = (disks.position(idx), disks.radius(idx));
+                let inside = r * (1.0 - SLOP);
+                for (axis, length) in [domain.width, domain.height].into_iter().enumerate() {
+                    position[axis] = position[axis].clamp(inside, length - inside);
+                }
+                disks.set_position(idx, position);
+            }
+        }
+    }
+}
