@@ -14,6 +14,7 @@ pub mod particles;
 pub mod pilot;
 pub mod scene;
 pub mod schedule;
+pub mod snapshot;
 pub mod step;
 
 pub use particles::{Disk, DiskSlices, Particles};
