@@ -394,10 +394,11 @@ mod tests {
         let n_coloured = frame.pixels.iter().filter(|&&p| p != BACKGROUND).count();
         assert_eq!(n_coloured, 44);
         assert_ne!(frame.pixels[20 * 40 + 20], BACKGROUND);
-        // Panning right by half the drawing moves the disk out of sight.
-        zoomed.pan_by(0.5, 0.0);
+        // Panning right by a quarter of the drawing moves the disk 10 px to the left.
+        zoomed.pan_by(0.25, 0.0);
         let moved = drawn(&snapshot(&[(10.0, 10.0, 0.9, 0.0)]), &zoomed);
-        assert!(moved.pixels.iter().all(|&p| p == BACKGROUND));
+        assert_eq!(moved.pixels[20 * 40 + 20], BACKGROUND);
+        assert_eq!(moved.pixels[20 * 40 + 10], frame.pixels[20 * 40 + 20]);
     }
 
     #[test]
