@@ -4,3 +4,5 @@
 //! differently from `collide simulate`.
 
 pub mod raster;
+pub mod status;
+pub mod window;

@@ -128,9 +128,25 @@ impl Frame {
     }
 }
 
+/// How a frame drew the disks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Drawn {
+    Circles,
+    Splat,
+}
+
+impl Drawn {
+    pub fn name(self) -> &'static str {
+        match self {
+            Drawn::Circles => "circles",
+            Drawn::Splat => "splat",
+        }
+    }
+}
+
 /// Draws `snapshot` as `view` shows it into `frame` (resized to the view, the status
-/// rows untouched unless the size changed).
-pub fn draw(snapshot: &Snapshot, view: &View, frame: &mut Frame) {
+/// rows untouched unless the size changed), and says how.
+pub fn draw(snapshot: &Snapshot, view: &View, frame: &mut Frame) -> Drawn {
     let (width, height) = (view.width, view.height);
     if frame.palette.is_empty() {
         frame.palette = palette();
@@ -144,12 +160,15 @@ pub fn draw(snapshot: &Snapshot, view: &View, frame: &mut Frame) {
     }
     frame.pixels[..width * height].fill(BACKGROUND);
     let scale = view.scale();
-    if f64::from(snapshot.max_radius) * scale < SPLAT_BELOW_PX {
+    let drawn = if f64::from(snapshot.max_radius) * scale < SPLAT_BELOW_PX {
         splat(snapshot, view, frame);
+        Drawn::Splat
     } else {
         circles(snapshot, view, frame);
-    }
+        Drawn::Circles
+    };
     outline(view, frame);
+    drawn
 }
 
 /// Float pixel coordinates are x·scale + offset: the view's transform in f32.
