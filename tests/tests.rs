@@ -10,3 +10,4 @@ mod mpi;
 mod physics;
 mod report;
 mod study;
+mod view;
