@@ -19,8 +19,7 @@ use anyhow::{Context, bail};
 use minifb::{Key, KeyRepeat, Window, WindowOptions};
 use serde::Serialize;
 
-use crate::backend::BackendError;
-use crate::backend::threads::ThreadedStepper;
+use crate::backend::threads::{self, ThreadedStepper};
 use crate::output::write_atomically;
 use crate::render::fast_speed;
 use crate::sim::Particles;
@@ -378,14 +377,7 @@ impl Stepping {
                 prepared.event,
             )),
             Some(threads) => Stepping::Rayon {
-                pool: rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads.get())
-                    .thread_name(|index| format!("collide-worker-{index}"))
-                    .build()
-                    .map_err(|source| BackendError::ThreadPool {
-                        threads: threads.get(),
-                        source,
-                    })?,
+                pool: threads::pool(threads)?,
                 stepper: Box::new(ThreadedStepper::new(
                     scene.domain,
                     scene.physics,
