@@ -62,7 +62,7 @@ pub struct ViewStats {
     pub snapshots: u64,
     /// Steps done when the view closed.
     pub steps: u64,
-    /// Steps per second of wall time over the same span as `frames_per_s`.
+    /// Steps per second of wall time, from the first frame to the view's close.
     pub steps_per_s: f64,
     pub n: usize,
     /// Simulated time at exit: steps × dt.
@@ -111,6 +111,15 @@ struct Controls {
     /// Single steps asked for while paused.
     single_steps: AtomicU64,
     quit: AtomicBool,
+}
+
+/// The status line's rates, over the time since `since` (about half a second).
+struct Rates {
+    since: Instant,
+    frames: u64,
+    steps: u64,
+    frames_per_s: f64,
+    steps_per_s: f64,
 }
 
 /// What the simulation thread leaves behind.
@@ -196,7 +205,13 @@ pub fn run(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<ViewS
         .max_fps
         .map(|fps| Duration::from_secs_f64(1.0 / f64::from(fps)));
     let started = Instant::now();
-    let mut last_rate = (started, 0_u64, 0_u64, 0.0, 0.0);
+    let mut rates = Rates {
+        since: started,
+        frames: 0,
+        steps: 0,
+        frames_per_s: 0.0,
+        steps_per_s: 0.0,
+    };
     let mut status = String::new();
     let mut closing = false;
     let outcome = loop {
@@ -284,18 +299,22 @@ pub fn run(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<ViewS
         frame_s.push(frame_start.elapsed().as_secs_f64());
         // The status line shows the rates over about the last half second.
         let steps = current.steps;
-        let since = last_rate.0.elapsed().as_secs_f64();
-        if since >= 0.5 || status.is_empty() {
-            let frames_done = frame_s.len() as u64;
-            let fps = (frames_done - last_rate.1) as f64 / since.max(1e-9);
-            let sps = (steps - last_rate.2) as f64 / since.max(1e-9);
-            last_rate = (Instant::now(), frames_done, steps, fps, sps);
+        let seconds = rates.since.elapsed().as_secs_f64();
+        if seconds >= 0.5 || status.is_empty() {
+            let frames = frame_s.len() as u64;
+            rates = Rates {
+                since: Instant::now(),
+                frames,
+                steps,
+                frames_per_s: (frames - rates.frames) as f64 / seconds.max(1e-9),
+                steps_per_s: (steps - rates.steps) as f64 / seconds.max(1e-9),
+            };
         }
         let paused = controls.paused.load(Ordering::Relaxed);
         status = format!(
             "{:.0} frames/s  {:.0} steps/s  N {}  t {:.3}  E {:.6e}  step {}/{}  {} steps/frame{}",
-            last_rate.3,
-            last_rate.4,
+            rates.frames_per_s,
+            rates.steps_per_s,
             n,
             steps as f64 * dt,
             current.snapshot.kinetic_energy,
