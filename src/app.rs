@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use crate::backend::{BackendSpec, RunOutcome, serial, threads};
 use crate::check::{CheckOptions, CheckOutcome};
 use crate::cli::{
-    BackendName, CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs,
+    BackendName, CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs, ViewArgs,
 };
 use crate::output::{write_atomically, write_state_csv};
 use crate::runner::{Calibration, RunOptions};
@@ -15,9 +15,10 @@ use crate::scene_file;
 use crate::spec::InjectedSlowdown;
 #[cfg(feature = "mpi")]
 use crate::summary::RunSummary;
+use crate::view::window::ViewOptions;
 use crate::{
     accuracy, accuracy_figures, analysis, calibrate, check, figures, manifest, render, report,
-    results, runner,
+    results, runner, view,
 };
 
 /// How a command that did its job ended: `main` maps this to the exit code.
@@ -38,6 +39,7 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         }
         Command::Report(args) => write_report(&args),
         Command::Render(args) => render_scene(&args),
+        Command::View(args) => view_scene(&args),
         Command::Check(args) => return run_check(&args),
         Command::Calibrate => {
             let seconds = calibrate::workload_seconds();
@@ -96,6 +98,36 @@ fn render_scene(args: &RenderArgs) -> anyhow::Result<()> {
             path.display()
         );
     }
+    Ok(())
+}
+
+fn view_scene(args: &ViewArgs) -> anyhow::Result<()> {
+    let spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
+    if spec.method.method.may_be_event() && args.threads.is_some() {
+        bail!(
+            "{}: the event method (which method auto may choose) runs on the serial backend \
+             only; drop --threads, or use --method step",
+            args.scene.display()
+        );
+    }
+    let prepared = spec
+        .prepare()
+        .with_context(|| format!("{}", args.scene.display()))?;
+    let options = ViewOptions {
+        width: args.size.0,
+        height: args.size.1,
+        threads: args.threads,
+        frames: args.frames,
+        max_fps: (args.max_fps > 0).then_some(args.max_fps),
+        steps_per_frame: args.steps_per_frame,
+        stats: args.stats.clone(),
+        screenshot: args.screenshot.clone(),
+    };
+    let stats = view::window::run(prepared, &options)?;
+    println!(
+        "{} frames at {:.1} frames/s; {} steps at {:.1} steps/s; state {}",
+        stats.frames, stats.frames_per_s, stats.steps, stats.steps_per_s, stats.state_hash
+    );
     Ok(())
 }
 

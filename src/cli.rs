@@ -32,6 +32,10 @@ pub enum Command {
     Report(ReportArgs),
     /// Draw a scene: a PNG of its disks after the run, and/or a GIF of the run.
     Render(RenderArgs),
+    /// Watch a scene run in a window: disks coloured by speed, frames and steps per
+    /// second. Keys: space pause, . one step, [ ] steps per frame, + - zoom, arrows pan,
+    /// 0 whole box, p screenshot, Esc quit.
+    View(ViewArgs),
     /// CI timing check: run a small manifest and compare it with a recorded baseline
     /// (exit 0: nothing regressed, 1: a regression, 2: an error).
     Check(CheckArgs),
@@ -79,6 +83,35 @@ pub struct RenderArgs {
     /// Frames of the GIF, spread evenly over the run.
     #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(2..=1000))]
     pub frames: u32,
+    #[command(flatten)]
+    pub overrides: OverrideArgs,
+}
+
+#[derive(Debug, Args)]
+pub struct ViewArgs {
+    /// Scene file (TOML), e.g. experiments/scenes/seed-1000.toml.
+    pub scene: PathBuf,
+    /// Step with the rayon backend on this many threads (default: the serial backend).
+    #[arg(long, value_parser = parse_workers)]
+    pub threads: Option<NonZeroUsize>,
+    /// Exit after this many frames.
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub frames: Option<u64>,
+    /// At exit, write frame and step rates and where the time went (JSON) to FILE.
+    #[arg(long, value_name = "FILE")]
+    pub stats: Option<PathBuf>,
+    /// At exit, write the last frame to FILE (PNG); the p key writes there too.
+    #[arg(long, value_name = "FILE.png")]
+    pub screenshot: Option<PathBuf>,
+    /// Pixels of the drawing, WIDTHxHEIGHT (the status line comes below it).
+    #[arg(long, value_name = "WxH", default_value = "800x800", value_parser = parse_size)]
+    pub size: (usize, usize),
+    /// Frames per second at most; 0 draws as fast as it can (to measure).
+    #[arg(long, value_name = "FPS", default_value_t = 60)]
+    pub max_fps: u32,
+    /// Steps between two frames at the start ([ and ] halve and double it).
+    #[arg(long, value_name = "STEPS", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    pub steps_per_frame: u64,
     #[command(flatten)]
     pub overrides: OverrideArgs,
 }
@@ -227,6 +260,16 @@ fn parse_dt(text: &str) -> Result<DtValue, String> {
 fn parse_workers(text: &str) -> Result<NonZeroUsize, String> {
     text.parse::<NonZeroUsize>()
         .map_err(|_| format!("expected a whole number of at least 1, got \"{text}\""))
+}
+
+fn parse_size(text: &str) -> Result<(usize, usize), String> {
+    let size = text.split_once('x').and_then(|(w, h)| {
+        let (w, h) = (w.parse::<usize>().ok()?, h.parse::<usize>().ok()?);
+        ((1..=16384).contains(&w) && (1..=16384).contains(&h)).then_some((w, h))
+    });
+    size.ok_or_else(|| {
+        format!("expected WIDTHxHEIGHT in pixels, each 1 to 16384 (e.g. 800x800), got \"{text}\"")
+    })
 }
 
 fn parse_seconds(text: &str) -> Result<f64, String> {

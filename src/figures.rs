@@ -102,12 +102,14 @@ fn colour(backend: &str) -> RGBColor {
     }
 }
 
+/// DejaVu Sans (assets/DejaVuSans-LICENSE.txt), embedded once for figures and the live view.
+pub(crate) const FONT_BYTES: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+
 pub(crate) fn register_font() {
     static FONT_ONCE: Once = Once::new();
     FONT_ONCE.call_once(|| {
-        let bytes = include_bytes!("../assets/DejaVuSans.ttf");
         // The embedded font is valid; failing here would be a build defect.
-        plotters::style::register_font(FONT, FontStyle::Normal, bytes)
+        plotters::style::register_font(FONT, FontStyle::Normal, FONT_BYTES)
             .unwrap_or_else(|_| panic!("the embedded DejaVu Sans is a valid font"));
     });
 }

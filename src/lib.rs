@@ -27,3 +27,4 @@ pub mod sim;
 pub mod spec;
 pub mod stats;
 pub mod summary;
+pub mod view;

@@ -10,6 +10,7 @@ use plotters::prelude::*;
 use crate::sim::engine::Engine;
 use crate::sim::{Boundary, Particles, Scene};
 use crate::spec::PreparedRun;
+use crate::view::raster::speed_rgb;
 
 /// Pixels along the longer side of the box.
 const LONG_SIDE_PX: f64 = 800.0;
@@ -48,14 +49,10 @@ impl Frame {
     }
 }
 
-/// Blue (at rest) through red (at `fast` and above).
+/// Blue (at rest) through red (at `fast` and above), the live view's colours.
 fn speed_colour(speed: f64, fast: f64) -> RGBColor {
-    let t = (speed / fast).clamp(0.0, 1.0);
-    RGBColor(
-        (40.0 + 200.0 * t) as u8,
-        (90.0 + 40.0 * (1.0 - (2.0 * t - 1.0).abs())) as u8,
-        (220.0 - 180.0 * t) as u8,
-    )
+    let [r, g, b] = speed_rgb(speed / fast);
+    RGBColor(r, g, b)
 }
 
 fn draw_state(
@@ -88,17 +85,9 @@ fn draw_state(
     Ok(())
 }
 
-/// Twice the rms speed: the colour scale's red end.
-fn fast_speed(particles: &Particles) -> f64 {
-    let n = particles.len().max(1) as f64;
-    let mean_square: f64 = particles
-        .vx
-        .iter()
-        .zip(&particles.vy)
-        .map(|(vx, vy)| vx * vx + vy * vy)
-        .sum::<f64>()
-        / n;
-    let fast = 2.0 * mean_square.sqrt();
+/// Twice the rms speed: the colour scale's red end (1 for a gas at rest).
+pub fn fast_speed(particles: &Particles) -> f64 {
+    let fast = 2.0 * particles.rms_speed();
     if fast > 0.0 { fast } else { 1.0 }
 }
 

@@ -11,3 +11,4 @@ mod physics;
 mod report;
 mod resting;
 mod study;
+mod view;

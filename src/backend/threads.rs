@@ -35,17 +35,22 @@ use crate::spec::RunSpec;
 /// Disks per parallel chunk of the per-disk stage: large enough to amortise scheduling.
 const MIN_CHUNK: usize = 4096;
 
-/// Builds the scene, steps it on a pool of `threads` threads, and measures the run.
-pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendError> {
-    let setup_start = Instant::now();
-    let pool = rayon::ThreadPoolBuilder::new()
+/// A pool of exactly `threads` threads for one run (never the global pool).
+pub fn pool(threads: NonZeroUsize) -> Result<rayon::ThreadPool, BackendError> {
+    rayon::ThreadPoolBuilder::new()
         .num_threads(threads.get())
         .thread_name(|index| format!("collide-worker-{index}"))
         .build()
         .map_err(|source| BackendError::ThreadPool {
             threads: threads.get(),
             source,
-        })?;
+        })
+}
+
+/// Builds the scene, steps it on a pool of `threads` threads, and measures the run.
+pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendError> {
+    let setup_start = Instant::now();
+    let pool = pool(threads)?;
     let mut prepared = spec.prepare()?;
     let mut particles = prepared.take_particles();
     let scene = &prepared.scene;

@@ -16,6 +16,7 @@ pub mod pilot;
 pub mod resolve;
 pub mod scene;
 pub mod schedule;
+pub mod snapshot;
 pub mod step;
 
 pub use particles::{Disk, DiskSlices, Particles};

@@ -1,0 +1,533 @@
+//! `collide view`: a scene run on its own thread and drawn in a window as it happens.
+//!
+//! The simulation thread steps the same engines as `collide simulate` (serial, or the
+//! rayon stepper on its own pool), stopping at the scene's step count. After every
+//! `steps per frame` steps it waits for an empty snapshot from the drawing thread, fills
+//! it and hands it back; two snapshots circulate, so stepping goes on while a frame is
+//! drawn. The drawing thread redraws the newest snapshot every frame (zoom and pan stay
+//! smooth when steps are slow) and counts frames and steps apart: two rates, never one.
+
+use std::num::NonZeroUsize;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use minifb::{Key, KeyRepeat, Window, WindowOptions};
+use serde::Serialize;
+
+use crate::backend::threads::{self, ThreadedStepper};
+use crate::output::write_atomically;
+use crate::render::fast_speed;
+use crate::sim::Particles;
+use crate::sim::engine::Engine;
+use crate::sim::observe::state_hash;
+use crate::sim::snapshot::Snapshot;
+use crate::spec::{Method, PreparedRun};
+use crate::view::raster::{Drawn, Frame, View, draw};
+use crate::view::status::{STATUS_ROWS, StatusFont};
+
+/// What `collide view` was asked for, validated.
+#[derive(Clone, Debug)]
+pub struct ViewOptions {
+    /// Pixels of the drawing (the status line comes below it).
+    pub width: usize,
+    pub height: usize,
+    /// `None`: the serial engine; `Some`: the rayon stepper on a pool of this size.
+    pub threads: Option<NonZeroUsize>,
+    /// Exit after this many frames.
+    pub frames: Option<u64>,
+    /// Frames per second at most (`None`: as fast as they can be drawn).
+    pub max_fps: Option<u32>,
+    /// Steps between two snapshots at the start (keys change it).
+    pub steps_per_frame: u64,
+    /// Where to write the statistics (JSON) at exit.
+    pub stats: Option<PathBuf>,
+    /// Where to write the last frame (PNG) at exit, and the screenshot key's frames.
+    pub screenshot: Option<PathBuf>,
+}
+
+/// What `--stats` writes: the frame rate and the step rate, and where the time went.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ViewStats {
+    /// Frames drawn and presented.
+    pub frames: u64,
+    /// Frames per second over the frames' own time (the first frame's start to the
+    /// last frame's end).
+    pub frames_per_s: f64,
+    /// Distinct states shown (snapshots taken; a paused or slow run redraws one).
+    pub snapshots: u64,
+    /// Steps done when the view closed.
+    pub steps: u64,
+    /// Steps per second of wall time, from the first frame to the view's close.
+    pub steps_per_s: f64,
+    pub n: usize,
+    /// Simulated time at exit: steps × dt.
+    pub simulated_time: f64,
+    /// Median and 95th percentile of one frame's time (drawing, presenting, waiting).
+    pub frame_ms_median: f64,
+    pub frame_ms_p95: f64,
+    /// Mean milliseconds per snapshot filled (simulation thread).
+    pub snapshot_ms_mean: f64,
+    /// Mean milliseconds per frame drawing (the disks and the status line).
+    pub draw_ms_mean: f64,
+    /// Mean milliseconds per frame handing the pixels to the window (XPutImage) and
+    /// reading its input.
+    pub present_ms_mean: f64,
+    /// Mean milliseconds per frame spent waiting for the frame cap.
+    pub wait_ms_mean: f64,
+    /// Mean milliseconds per step (simulation thread).
+    pub step_ms_mean: f64,
+    /// How the last frame drew the disks: "circles" or "splat".
+    pub drawn_as: &'static str,
+    /// The hash of the state at exit (as `collide simulate` prints it).
+    pub state_hash: String,
+    pub backend: &'static str,
+    pub threads: usize,
+    pub width: usize,
+    pub height: usize,
+    /// The frame cap in frames per second (`null`: none).
+    pub frame_cap_per_s: Option<u32>,
+    /// The X display drawn on, and whether it was virtual (Xvfb; `null`: unknown).
+    pub display: String,
+    pub virtual_display: Option<bool>,
+}
+
+/// A snapshot handed between the two threads, with the step it shows.
+#[derive(Debug, Default)]
+struct Shown {
+    snapshot: Snapshot,
+    steps: u64,
+}
+
+/// What the keys ask of the simulation thread.
+#[derive(Debug)]
+struct Controls {
+    paused: AtomicBool,
+    steps_per_frame: AtomicU64,
+    /// Single steps asked for while paused.
+    single_steps: AtomicU64,
+    quit: AtomicBool,
+}
+
+/// The status line's rates, over the time since `since` (about half a second).
+struct Rates {
+    since: Instant,
+    frames: u64,
+    steps: u64,
+    frames_per_s: f64,
+    steps_per_s: f64,
+}
+
+/// What the simulation thread leaves behind.
+struct Stepped {
+    particles: Particles,
+    steps: u64,
+    step_s: f64,
+    snapshot_s: f64,
+    snapshots: u64,
+}
+
+/// A window of `width` × `height` pixels that shows frames.
+pub struct Screen {
+    window: Window,
+}
+
+impl Screen {
+    /// Opens a window, or says why there is none and what to do instead.
+    pub fn open(title: &str, width: usize, height: usize) -> anyhow::Result<Screen> {
+        let instead = "draw pictures without a display with `collide render SCENE --png FILE` \
+                       (or --gif FILE), or run the view on a virtual display: \
+                       `xvfb-run -a collide view SCENE`";
+        if std::env::var_os("DISPLAY").is_none_or(|display| display.is_empty()) {
+            bail!("no display to open a window on (DISPLAY is not set); {instead}");
+        }
+        let mut window = Window::new(title, width, height, WindowOptions::default())
+            .map_err(|err| anyhow::anyhow!("cannot open a window ({err}); {instead}"))?;
+        // Frames are paced by the view itself (see `--max-fps`), not by minifb.
+        window.set_target_fps(0);
+        Ok(Screen { window })
+    }
+
+    /// Shows the frame (box and status rows) and reads the window's input.
+    pub fn present(&mut self, frame: &Frame) -> anyhow::Result<()> {
+        self.window
+            .update_with_buffer(&frame.pixels, frame.width, frame.height + frame.status_rows)
+            .map_err(|err| anyhow::anyhow!("cannot draw in the window: {err}"))
+    }
+
+    /// The X11 window id (for reading the window back in tests).
+    pub fn x11_window_id(&self) -> u32 {
+        self.window.get_window_handle() as usize as u32
+    }
+}
+
+/// Runs the scene in a window until it is closed (Escape or the window's close button)
+/// or `options.frames` frames are drawn.
+pub fn run(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<ViewStats> {
+    debug_assert!(options.threads.is_none() || prepared.method == Method::Step);
+    let mut screen = Screen::open("collide view", options.width, options.height + STATUS_ROWS)?;
+    let n = prepared.scene.particles.len();
+    let (dt, total_steps) = (prepared.params.dt, prepared.steps);
+    let domain = prepared.scene.domain;
+    let controls = Arc::new(Controls {
+        paused: AtomicBool::new(false),
+        steps_per_frame: AtomicU64::new(options.steps_per_frame),
+        single_steps: AtomicU64::new(0),
+        quit: AtomicBool::new(false),
+    });
+    let (empty_tx, empty_rx) = channel::<Shown>();
+    let (full_tx, full_rx) = channel::<Shown>();
+    for _ in 0..2 {
+        empty_tx.send(Shown::default()).ok();
+    }
+    let stepping = Stepping::new(&prepared, options.threads)?;
+    let simulation = {
+        let controls = Arc::clone(&controls);
+        thread::Builder::new()
+            .name("collide-view-simulation".to_owned())
+            .spawn(move || simulate(prepared, stepping, &controls, &empty_rx, &full_tx))
+            .context("cannot start the simulation thread")?
+    };
+
+    let font = StatusFont::default();
+    let mut view = View::whole_box(options.width, options.height, domain.width, domain.height);
+    let mut frame = Frame::with_status_rows(STATUS_ROWS);
+    let mut shown: Option<Shown> = None;
+    let mut frame_s = Vec::new();
+    let (mut draw_s, mut present_s, mut wait_s) = (0.0, 0.0, 0.0);
+    let mut drawn_as = Drawn::Circles;
+    let mut screenshots = 0_u32;
+    let frame_interval = options
+        .max_fps
+        .map(|fps| Duration::from_secs_f64(1.0 / f64::from(fps)));
+    let started = Instant::now();
+    let mut rates = Rates {
+        since: started,
+        frames: 0,
+        steps: 0,
+        frames_per_s: 0.0,
+        steps_per_s: 0.0,
+    };
+    let mut status = String::new();
+    let mut closing = false;
+    let outcome = loop {
+        if closing
+            || !screen.window.is_open()
+            || options.frames.is_some_and(|k| frame_s.len() as u64 >= k)
+        {
+            break Ok(());
+        }
+        let frame_start = Instant::now();
+        // A new state if one is ready (at most one per frame, so that `steps per
+        // frame` holds); the one it replaces goes back to be refilled.
+        if shown.is_none() {
+            shown = full_rx.recv().ok();
+        } else if let Ok(fresh) = full_rx.try_recv()
+            && let Some(old) = shown.replace(fresh)
+        {
+            empty_tx.send(old).ok();
+        }
+        let Some(current) = shown.as_ref() else {
+            break Err(anyhow::anyhow!(
+                "the simulation thread stopped unexpectedly"
+            ));
+        };
+        let draw_start = Instant::now();
+        drawn_as = draw(&current.snapshot, &view, &mut frame);
+        font.write(&mut frame, &status);
+        draw_s += draw_start.elapsed().as_secs_f64();
+        let present_start = Instant::now();
+        if let Err(err) = screen.present(&frame) {
+            break Err(err);
+        }
+        present_s += present_start.elapsed().as_secs_f64();
+        for key in screen.window.get_keys_pressed(KeyRepeat::Yes) {
+            match key {
+                Key::Escape => closing = true,
+                Key::Space => {
+                    controls.paused.fetch_xor(true, Ordering::Relaxed);
+                }
+                Key::Period => {
+                    controls.single_steps.fetch_add(1, Ordering::Relaxed);
+                }
+                Key::RightBracket => {
+                    let spf = controls.steps_per_frame.load(Ordering::Relaxed);
+                    controls
+                        .steps_per_frame
+                        .store((spf * 2).min(1 << 20), Ordering::Relaxed);
+                }
+                Key::LeftBracket => {
+                    let spf = controls.steps_per_frame.load(Ordering::Relaxed);
+                    controls
+                        .steps_per_frame
+                        .store((spf / 2).max(1), Ordering::Relaxed);
+                }
+                Key::Equal | Key::NumPadPlus => view.zoom_by(1.25),
+                Key::Minus | Key::NumPadMinus => view.zoom_by(0.8),
+                Key::Left => view.pan_by(-0.1, 0.0),
+                Key::Right => view.pan_by(0.1, 0.0),
+                Key::Up => view.pan_by(0.0, 0.1),
+                Key::Down => view.pan_by(0.0, -0.1),
+                Key::Key0 => {
+                    view =
+                        View::whole_box(options.width, options.height, domain.width, domain.height);
+                }
+                Key::P => {
+                    screenshots += 1;
+                    let path = options.screenshot.clone().unwrap_or_else(|| {
+                        PathBuf::from(format!("collide-view-{screenshots}.png"))
+                    });
+                    match write_png(&path, &frame) {
+                        Ok(()) => println!("screenshot written to {}", path.display()),
+                        Err(err) => eprintln!("error: {err:#}"),
+                    }
+                }
+                _ => {}
+            }
+        }
+        if let Some(interval) = frame_interval {
+            let wait_start = Instant::now();
+            if let Some(rest) = interval.checked_sub(frame_start.elapsed()) {
+                thread::sleep(rest);
+            }
+            wait_s += wait_start.elapsed().as_secs_f64();
+        }
+        frame_s.push(frame_start.elapsed().as_secs_f64());
+        // The status line shows the rates over about the last half second.
+        let steps = current.steps;
+        let seconds = rates.since.elapsed().as_secs_f64();
+        if seconds >= 0.5 || status.is_empty() {
+            let frames = frame_s.len() as u64;
+            rates = Rates {
+                since: Instant::now(),
+                frames,
+                steps,
+                frames_per_s: (frames - rates.frames) as f64 / seconds.max(1e-9),
+                steps_per_s: (steps - rates.steps) as f64 / seconds.max(1e-9),
+            };
+        }
+        let paused = controls.paused.load(Ordering::Relaxed);
+        status = format!(
+            "{:.0} frames/s  {:.0} steps/s  N {}  t {:.3}  E {:.6e}  step {}/{}  {} steps/frame{}",
+            rates.frames_per_s,
+            rates.steps_per_s,
+            n,
+            steps as f64 * dt,
+            current.snapshot.kinetic_energy,
+            steps,
+            total_steps,
+            controls.steps_per_frame.load(Ordering::Relaxed),
+            if paused { "  paused (space)" } else { "" },
+        );
+    };
+    controls.quit.store(true, Ordering::Relaxed);
+    drop(empty_tx);
+    drop(full_rx);
+    let stepped = simulation
+        .join()
+        .map_err(|_| anyhow::anyhow!("the simulation thread panicked"))?;
+    let session_s = started.elapsed().as_secs_f64();
+    outcome?;
+    if let Some(path) = &options.screenshot {
+        write_png(path, &frame)?;
+    }
+    let display = std::env::var("DISPLAY").unwrap_or_default();
+    let frames = frame_s.len() as u64;
+    let per_frame = |seconds: f64| 1e3 * seconds / frames.max(1) as f64;
+    let frames_s: f64 = frame_s.iter().sum();
+    let stats = ViewStats {
+        frames,
+        frames_per_s: frames as f64 / frames_s,
+        snapshots: stepped.snapshots,
+        steps: stepped.steps,
+        steps_per_s: stepped.steps as f64 / session_s,
+        n,
+        simulated_time: stepped.steps as f64 * dt,
+        frame_ms_median: 1e3 * quantile(&mut frame_s, 0.5),
+        frame_ms_p95: 1e3 * quantile(&mut frame_s, 0.95),
+        snapshot_ms_mean: 1e3 * stepped.snapshot_s / stepped.snapshots.max(1) as f64,
+        draw_ms_mean: per_frame(draw_s),
+        present_ms_mean: per_frame(present_s),
+        wait_ms_mean: per_frame(wait_s),
+        step_ms_mean: 1e3 * stepped.step_s / stepped.steps.max(1) as f64,
+        drawn_as: drawn_as.name(),
+        state_hash: state_hash(&stepped.particles),
+        backend: if options.threads.is_some() {
+            "rayon"
+        } else {
+            "serial"
+        },
+        threads: options.threads.map_or(1, NonZeroUsize::get),
+        width: options.width,
+        height: options.height,
+        frame_cap_per_s: options.max_fps,
+        virtual_display: is_virtual(&display),
+        display,
+    };
+    if let Some(path) = &options.stats {
+        let text = serde_json::to_string_pretty(&stats)?;
+        write_atomically(path, |out| writeln!(out, "{text}"))?;
+    }
+    Ok(stats)
+}
+
+/// The engine the simulation thread steps: the serial reference, or the rayon stepper
+/// with its own pool (never the global one).
+enum Stepping {
+    Serial(Engine),
+    Rayon {
+        pool: rayon::ThreadPool,
+        stepper: Box<ThreadedStepper>,
+    },
+}
+
+impl Stepping {
+    fn new(prepared: &PreparedRun, threads: Option<NonZeroUsize>) -> anyhow::Result<Stepping> {
+        let scene = &prepared.scene;
+        Ok(match threads {
+            None => Stepping::Serial(Engine::new(
+                scene,
+                prepared.method,
+                prepared.params,
+                prepared.event,
+            )),
+            Some(threads) => Stepping::Rayon {
+                pool: threads::pool(threads)?,
+                stepper: Box::new(ThreadedStepper::new(
+                    scene.domain,
+                    scene.physics,
+                    prepared.params,
+                    &scene.particles,
+                    threads.get(),
+                )),
+            },
+        })
+    }
+
+    fn step(&mut self, particles: &mut Particles) {
+        match self {
+            Stepping::Serial(engine) => engine.step(particles),
+            Stepping::Rayon { pool, stepper } => pool.install(|| stepper.step(particles)),
+        }
+    }
+}
+
+/// The simulation thread: steps, and fills an empty snapshot after every batch of
+/// steps (and for the initial state); ends when the drawing thread hangs up.
+fn simulate(
+    prepared: PreparedRun,
+    mut stepping: Stepping,
+    controls: &Controls,
+    empty: &Receiver<Shown>,
+    full: &Sender<Shown>,
+) -> Stepped {
+    let fast = fast_speed(&prepared.scene.particles);
+    let mut stepped = Stepped {
+        particles: prepared.scene.particles,
+        steps: 0,
+        step_s: 0.0,
+        snapshot_s: 0.0,
+        snapshots: 0,
+    };
+    let mut unshown = true;
+    while !controls.quit.load(Ordering::Relaxed) {
+        if unshown {
+            let Ok(mut shown) = empty.recv() else { break };
+            let start = Instant::now();
+            shown.snapshot.fill_from(&stepped.particles, fast);
+            shown.steps = stepped.steps;
+            stepped.snapshot_s += start.elapsed().as_secs_f64();
+            stepped.snapshots += 1;
+            if full.send(shown).is_err() {
+                break;
+            }
+            unshown = false;
+        }
+        let batch = if controls.paused.load(Ordering::Relaxed) {
+            controls.single_steps.swap(0, Ordering::Relaxed)
+        } else {
+            controls.steps_per_frame.load(Ordering::Relaxed)
+        };
+        let batch = batch.min(prepared.steps - stepped.steps);
+        if batch == 0 {
+            // Paused, or the run is over: nothing new to show.
+            thread::sleep(Duration::from_millis(5));
+            continue;
+        }
+        let start = Instant::now();
+        for _ in 0..batch {
+            stepping.step(&mut stepped.particles);
+        }
+        stepped.step_s += start.elapsed().as_secs_f64();
+        stepped.steps += batch;
+        unshown = true;
+    }
+    stepped
+}
+
+/// Writes the frame (box and status line) as an 8-bit RGB PNG, atomically.
+pub fn write_png(path: &Path, frame: &Frame) -> anyhow::Result<()> {
+    let rows = frame.height + frame.status_rows;
+    let rgb: Vec<u8> = frame
+        .pixels
+        .iter()
+        .flat_map(|&pixel| {
+            let [_, r, g, b] = pixel.to_be_bytes();
+            [r, g, b]
+        })
+        .collect();
+    write_atomically(path, |out| {
+        let mut encoder = png::Encoder::new(out, frame.width as u32, rows as u32);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().map_err(std::io::Error::other)?;
+        writer
+            .write_image_data(&rgb)
+            .map_err(std::io::Error::other)?;
+        writer.finish().map_err(std::io::Error::other)
+    })
+}
+
+/// The `q` quantile of `values` (nearest rank; 0 for none). Sorts `values`.
+fn quantile(values: &mut [f64], q: f64) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    values.sort_by(f64::total_cmp);
+    let rank = (q * values.len() as f64).ceil() as usize;
+    values[rank.clamp(1, values.len()) - 1]
+}
+
+/// Whether the X display `display` (":99", "localhost:10.0") is an Xvfb virtual
+/// display: the server process named in its lock file is `Xvfb`. `None` when that
+/// cannot be told (a remote display, no lock file).
+fn is_virtual(display: &str) -> Option<bool> {
+    let number = display.strip_prefix(':')?.split('.').next()?;
+    let lock = std::fs::read_to_string(format!("/tmp/.X{number}-lock")).ok()?;
+    let pid: u32 = lock.trim().parse().ok()?;
+    let name = std::fs::read_to_string(format!("/proc/{pid}/comm")).ok()?;
+    Some(name.trim() == "Xvfb")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quantiles_take_the_nearest_rank() {
+        let mut ms: Vec<f64> = (1..=20).rev().map(f64::from).collect();
+        assert_eq!(quantile(&mut ms, 0.5), 10.0);
+        assert_eq!(quantile(&mut ms, 0.95), 19.0);
+        assert_eq!(quantile(&mut [], 0.5), 0.0);
+    }
+
+    #[test]
+    fn a_display_without_a_local_server_is_not_known_to_be_virtual() {
+        assert_eq!(is_virtual("remote:10.0"), None);
+        assert_eq!(is_virtual(":4242"), None);
+    }
+}
