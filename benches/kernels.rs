@@ -10,7 +10,7 @@
 //! in the `event` group it is collisions (pair and wall) per second of the event-driven
 //! method. The `step` and `event` groups run both methods on the same periodic gases at
 //! N = 10^4, 10^5 and 10^6: they are the cost model of `method = "auto"`.
-//! Run: `cargo bench --bench kernels` (MPI runs need `mpirun`: see the README's Speed section).
+//! Run: `cargo bench --bench kernels` (MPI runs need `mpirun` and `--features mpi`: see docs/performance.md).
 
 use std::time::{Duration, Instant};
 
@@ -56,7 +56,7 @@ fn warmed_up_serial(scene: &Scene) -> (Particles, Stepper) {
     (particles, stepper)
 }
 
-/// Issue 2's yardstick, "a straightforward cell-list code", benched beside our step so
+/// The yardstick, "a straightforward cell-list code", benched beside our step so
 /// that their ratio is measured in one run on one machine: square cells one contact
 /// diameter wide rebuilt by a counting sort every step, each disk tested against the rest
 /// of its cell and the four forward neighbour cells, contacts resolved as found (with
