@@ -9,4 +9,5 @@ mod cli;
 mod mpi;
 mod physics;
 mod report;
+mod schema;
 mod study;
