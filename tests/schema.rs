@@ -104,10 +104,7 @@ fn the_json_summary_fields_are_those_documented() {
         .filter(|f| !rows.contains_key(f.as_str()))
         .map(|f| format!("| `{f}` | what it means, its unit |"))
         .collect();
-    let stale: Vec<&String> = rows
-        .keys()
-        .filter(|name| !fields.contains(name))
-        .collect();
+    let stale: Vec<&String> = rows.keys().filter(|name| !fields.contains(name)).collect();
     assert!(
         missing.is_empty() && stale.is_empty(),
         "{DOC}, section `{heading}`, disagrees with `collide simulate --json`.\n\
