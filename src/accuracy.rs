@@ -10,7 +10,7 @@ use crate::records::{Record, STATUS_OK};
 use crate::results::median;
 
 /// A missed-collision fraction above this is a failed step (the stability map's boundary;
-/// issue 6's default tolerance for `dt = "auto"`).
+/// the default tolerance of `dt = "auto"`, [`crate::auto::DEFAULT_MISSED_TOLERANCE`]).
 pub const FAILURE_MISSED_FRACTION: f64 = 1e-3;
 
 /// A run whose disks went deeper into a wall than this fraction of their radius is

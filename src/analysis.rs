@@ -81,6 +81,13 @@ pub struct Setup {
     pub distinct_hashes: usize,
 }
 
+impl Setup {
+    /// Whether there is any scaling to show: more than one backend-and-workers point.
+    pub fn scales(&self) -> bool {
+        self.backends.iter().map(|b| b.points.len()).sum::<usize>() > 1
+    }
+}
+
 /// The successful records grouped into setups (in the manifest's order), each analysed
 /// per backend. The grouping, medians and spreads are polars aggregations.
 pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {

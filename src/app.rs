@@ -2,6 +2,8 @@
 
 use std::num::NonZeroUsize;
 
+use std::path::Path;
+
 use anyhow::{Context, bail};
 
 use crate::backend::{BackendSpec, RunOutcome, serial, threads};
@@ -10,6 +12,7 @@ use crate::cli::{
     BackendName, CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs, ViewArgs,
 };
 use crate::output::{write_atomically, write_state_csv};
+use crate::records::{self, Record, STATUS_OK};
 use crate::runner::{Calibration, RunOptions};
 use crate::scene_file;
 use crate::spec::InjectedSlowdown;
@@ -34,7 +37,7 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Simulate(args) => simulate(&args),
         Command::Run(args) => run_study(&args),
         Command::Results(args) => {
-            print!("{}", results::table(&results::load(&args.path)?));
+            print!("{}", results::summary(&results::load(&args.path)?)?);
             Ok(())
         }
         Command::Report(args) => write_report(&args),
@@ -140,24 +143,30 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
     let out = args
         .out
         .clone()
-        .unwrap_or_else(|| std::path::Path::new("reports").join(study));
-    std::fs::create_dir_all(&out).with_context(|| {
+        .unwrap_or_else(|| Path::new("reports").join(study));
+    report_into(&records, &args.path, &out)
+}
+
+/// Writes the report of `records` (read from `source`) into the folder `out`: report.md
+/// and its figures; prints where.
+fn report_into(records: &[Record], source: &Path, out: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out).with_context(|| {
         format!(
             "cannot create the report folder {}; choose another with --out",
             out.display()
         )
     })?;
-    let setups = analysis::analyse(&records)?;
-    let accuracy = if accuracy::is_accuracy_study(&records) {
-        let groups = accuracy::analyse(&records);
-        let (pareto, stability) = accuracy_figures::draw(&groups, &out)?;
+    let setups = analysis::analyse(records)?;
+    let accuracy = if accuracy::is_accuracy_study(records) {
+        let groups = accuracy::analyse(records);
+        let (pareto, stability) = accuracy_figures::draw(&groups, out)?;
         let figures = [pareto, stability]
             .iter()
             .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
             .collect();
-        let cooling = accuracy::cooling(&records);
+        let cooling = accuracy::cooling(records);
         if !cooling.is_empty() {
-            accuracy_figures::draw_cooling(&cooling, &out)?;
+            accuracy_figures::draw_cooling(&cooling, out)?;
         }
         Some(report::AccuracySection {
             groups,
@@ -177,11 +186,11 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
     };
     for (index, setup) in setups.iter().enumerate() {
         // One backend at one worker count has no scaling to draw (e.g. accuracy studies).
-        if setup.backends.iter().map(|b| b.points.len()).sum::<usize>() < 2 {
+        if !setup.scales() {
             pictures.figures.push(Vec::new());
             continue;
         }
-        let drawn = figures::draw_setup(setup, &out, &format!("setup-{}", index + 1))?;
+        let drawn = figures::draw_setup(setup, out, &format!("setup-{}", index + 1))?;
         let names = drawn
             .into_iter()
             .map(|(figure, path)| {
@@ -192,14 +201,12 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
         pictures.figures.push(names);
     }
     let path = out.join("report.md");
-    let text = report::markdown(
-        &records,
-        &setups,
-        &args.path.display().to_string(),
-        &pictures,
-    );
+    let text = report::markdown(records, &setups, &source.display().to_string(), &pictures);
     write_atomically(&path, |file| file.write_all(text.as_bytes()))?;
-    println!("report written to {}", path.display());
+    println!(
+        "report written to {}, its figures beside it",
+        path.display()
+    );
     Ok(())
 }
 
@@ -224,6 +231,20 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
         },
         outcome.results.display()
     );
+    // What the study was for: its table, and its report (failed runs are left out of both).
+    let records = records::read(&outcome.results)?;
+    if records.iter().any(|r| r.status == STATUS_OK) {
+        print!("\n{}", results::summary(&records)?);
+        if args.no_report {
+            println!(
+                "\nno report written (--no-report); write it with `collide report {}`",
+                outcome.results.display()
+            );
+        } else {
+            println!();
+            report_into(&records, &outcome.results, &args.reports.join(&study.name))?;
+        }
+    }
     if outcome.failed > 0 {
         bail!(
             "{} run(s) failed; their rows in {} say why (status, error)",
@@ -323,9 +344,8 @@ fn run_mpi(
     _: Option<NonZeroUsize>,
 ) -> anyhow::Result<Finished> {
     bail!(
-        "this collide was built without MPI support; rebuild it with \
-         `cargo build --release --features mpi` after installing OpenMPI \
-         (`apt-get install libopenmpi-dev openmpi-bin libclang-dev`)"
+        "this collide was built without MPI support; to use --backend mpi, {}",
+        runner::ENABLE_MPI
     )
 }
 

@@ -13,7 +13,7 @@ use crate::sim::scene::{Extent, PlacementError};
 use crate::sim::step::auto_dt;
 use crate::spec::{DEFAULT_DT_FRACTION, DtChoice, Method, MethodChoice, MethodSpec, SceneSource};
 
-/// Default of `missed_tolerance`: issue 6's 10⁻³ (also the accuracy study's failure line).
+/// Default of `missed_tolerance`: 10⁻³ (also the accuracy study's failure line).
 pub const DEFAULT_MISSED_TOLERANCE: f64 = 1e-3;
 
 /// The dt fractions tried, largest first: v_max·dt = f·r_min for f = 4, 2, 1, ½, … 1/128.
@@ -48,7 +48,7 @@ pub struct Measured {
 
 /// The cost model, measured by
 /// `cargo bench --features mpi --bench kernels -- '^(step|event)/'` on one idle machine
-/// (README, Accuracy: choosing automatically), both methods in the same runs so that
+/// (docs/accuracy.md, Choosing automatically), both methods in the same runs so that
 /// their rates compare even where the machine differs: the median of three runs within
 /// 40 minutes (this VM's speed drifted by up to 35% between them; the observation
 /// rates from the last, the first to time them with the state cold in the caches).

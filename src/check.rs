@@ -90,7 +90,7 @@ fn boot_id() -> String {
 
 /// Whether timing verdicts decide the outcome: only against a baseline recorded on this
 /// very machine since its last boot. Across machines (and VM instances, and reboots) the
-/// calibration leaves the simulator's normalised time off by up to about 20% (README),
+/// calibration leaves the simulator's normalised time off by up to about 20% (docs/ci-check.md),
 /// beyond any useful noise threshold; instruction counts do not move and always decide.
 fn timings_decide(baseline_boot: &str, this_boot: &str) -> bool {
     !this_boot.is_empty() && baseline_boot == this_boot

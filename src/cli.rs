@@ -13,24 +13,88 @@ use crate::spec::{MethodChoice, Observe};
 #[command(
     name = "collide",
     version,
-    about = "2D hard-disk collision simulator and scaling-study harness"
+    about = "2D hard-disk collision simulator and scaling-study harness",
+    after_help = EXAMPLES
 )]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
 }
 
+// Examples end each `--help`; a unit test parses every `collide ...` line of them.
+const EXAMPLES: &str = "\
+Examples:
+  A scaling study (serial and rayon; MPI with --features mpi): table, records, report
+    collide run experiments/quick.toml
+  One run of the seed's scene (1000 disks, 400 steps) on two threads
+    collide simulate experiments/scenes/seed-1000.toml --backend rayon --threads 2
+  Run `collide help <COMMAND>` for each command's own examples.";
+
+const SIMULATE_EXAMPLES: &str = "\
+Examples:
+  The seed's scene, summarised as text
+    collide simulate experiments/scenes/seed-1000.toml
+  20 times more disks on two threads, as one JSON object
+    collide simulate experiments/scenes/seed-1000.toml --n 20000 --backend rayon --threads 2 --json
+  The exact event-driven reference, with the final state as CSV
+    collide simulate experiments/scenes/two-disks-head-on.toml --method event --dump final.csv";
+
+const RUN_EXAMPLES: &str = "\
+Examples:
+  Records in results/quick/, the table printed, the report in reports/quick/
+    collide run experiments/quick.toml
+  Continue a study that was interrupted, running only the missing repetitions
+    collide run experiments/seed-report.toml --resume
+  Records elsewhere, no report (write it later with `collide report`)
+    collide run experiments/accuracy.toml --out /tmp/results --no-report";
+
+const RESULTS_EXAMPLES: &str = "\
+Examples:
+  Every recorded run of a study, then its speedup and efficiency per backend
+    collide results results/seed-report/
+  One results file
+    collide results results/baseline/records.parquet";
+
+const REPORT_EXAMPLES: &str = "\
+Examples:
+  report.md and its figures in reports/seed-report/
+    collide report results/seed-report/
+  The report of an accuracy study, written elsewhere
+    collide report results/accuracy/ --out /tmp/accuracy-report";
+
+const RENDER_EXAMPLES: &str = "\
+Examples:
+  2000 disks of the seed's gas, coloured by speed
+    collide render experiments/scenes/seed-1000.toml --n 2000 --png scene.png
+  An animated GIF of 200 steps in 40 frames
+    collide render experiments/scenes/seed-1000.toml --steps 200 --gif run.gif --frames 40";
+
+const CHECK_EXAMPLES: &str = "\
+Examples:
+  Time experiments/ci.toml and compare it with results/baseline/
+    collide check
+  Record a new baseline on purpose (then commit results/baseline/)
+    collide check --update-baseline
+  A stricter noise threshold (5%)
+    collide check experiments/ci.toml --noise 0.05";
+
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Run one scene and print a summary of what happened.
+    #[command(after_help = SIMULATE_EXAMPLES)]
     Simulate(SimulateArgs),
-    /// Run a scaling study from a manifest and record every run in Parquet.
+    /// Run a scaling study from a manifest, record every run in Parquet, then print the
+    /// scaling table and write the report.
+    #[command(after_help = RUN_EXAMPLES)]
     Run(RunArgs),
     /// Print a table of a study's recorded runs.
+    #[command(after_help = RESULTS_EXAMPLES)]
     Results(ResultsArgs),
     /// Write a markdown scaling report of a study's recorded runs.
+    #[command(after_help = REPORT_EXAMPLES)]
     Report(ReportArgs),
     /// Draw a scene: a PNG of its disks after the run, and/or a GIF of the run.
+    #[command(after_help = RENDER_EXAMPLES)]
     Render(RenderArgs),
     /// Watch a scene run in a window: disks coloured by speed, frames and steps per
     /// second. Keys: space pause, . one step, [ ] steps per frame, + - zoom, arrows pan,
@@ -38,6 +102,7 @@ pub enum Command {
     View(ViewArgs),
     /// CI timing check: run a small manifest and compare it with a recorded baseline
     /// (exit 0: nothing regressed, 1: a regression, 2: an error).
+    #[command(after_help = CHECK_EXAMPLES)]
     Check(CheckArgs),
     /// Time the fixed calibration workload that `collide check` normalises by.
     #[command(hide = true)]
@@ -138,6 +203,12 @@ pub struct RunArgs {
     /// No progress bar or notes (automatic when stdout is not a terminal).
     #[arg(long)]
     pub quiet: bool,
+    /// Reports root: the report (report.md and its figures) goes to DIR/<study name>/.
+    #[arg(long, value_name = "DIR", default_value = "reports")]
+    pub reports: PathBuf,
+    /// Write no report: print the table only (`collide report` writes it later).
+    #[arg(long, conflicts_with = "reports")]
+    pub no_report: bool,
 }
 
 #[derive(Debug, Args)]
@@ -307,5 +378,66 @@ fn parse_observe(text: &str) -> Result<Observe, String> {
         "timing" => Ok(Observe::Timing),
         "accuracy" => Ok(Observe::Accuracy),
         _ => Err(format!("expected timing or accuracy, got \"{text}\"")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::{CommandFactory, Parser};
+
+    use super::Cli;
+
+    /// The `collide ...` lines of a help text's examples, split into words.
+    fn examples(help: &str) -> Vec<Vec<&str>> {
+        help.lines()
+            .map(str::trim)
+            .filter(|line| line.starts_with("collide "))
+            .map(|line| line.split_whitespace().collect())
+            .collect()
+    }
+
+    #[test]
+    fn the_command_line_is_well_formed() {
+        Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn every_help_ends_in_examples_that_parse_and_name_existing_files() {
+        let top = Cli::command();
+        let mut helps = vec![(None, top.get_after_help().map(ToString::to_string))];
+        for sub in top.get_subcommands().filter(|sub| !sub.is_hide_set()) {
+            helps.push((
+                Some(sub.get_name().to_owned()),
+                sub.get_after_help().map(ToString::to_string),
+            ));
+        }
+        for (name, help) in helps {
+            let help = help.unwrap_or_else(|| panic!("`collide {name:?} --help` has no examples"));
+            let examples = examples(&help);
+            assert!(
+                examples.len() >= 2,
+                "{name:?}: fewer than two examples in {help}"
+            );
+            for words in examples {
+                if let Some(name) = &name {
+                    assert_eq!(
+                        words[1], name,
+                        "an example of `{name}` runs another command"
+                    );
+                }
+                if let Err(err) = Cli::try_parse_from(&words) {
+                    panic!("the example `{}` does not parse: {err}", words.join(" "));
+                }
+                // Shipped scenes and manifests: an example must not name a missing one.
+                for file in words.iter().filter(|w| w.ends_with(".toml")) {
+                    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
+                    assert!(
+                        path.exists(),
+                        "the example `{}` names a missing {file}",
+                        words.join(" ")
+                    );
+                }
+            }
+        }
     }
 }

@@ -230,7 +230,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Study, ManifestError> {
         invalid(
             err.span().map_or(0, |span| span.start),
             format!(
-                "{}; see the README section Experiment manifests for the keys a manifest accepts",
+                "{}; see docs/guide.md, Experiment manifests, for the keys a manifest accepts",
                 err.message().trim_end()
             ),
         )

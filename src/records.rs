@@ -1,5 +1,6 @@
 //! Study records: one row per repetition, kept in Parquet through polars (the schema is
-//! documented in the README; bump [`SCHEMA_VERSION`] when a column changes meaning).
+//! documented in docs/records.md, which a test keeps in step with [`to_frame`]; bump
+//! [`SCHEMA_VERSION`] when a column is added or changes meaning).
 
 use std::fs::File;
 use std::path::{Path, PathBuf};

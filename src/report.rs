@@ -55,9 +55,7 @@ pub fn markdown(records: &[Record], setups: &[Setup], source: &str, pictures: &P
     };
     // A study of one backend at one worker count per setup (an accuracy study) has no
     // scaling to report: its timings are in the accuracy tables.
-    let scales = setups
-        .iter()
-        .any(|s| s.backends.iter().map(|b| b.points.len()).sum::<usize>() > 1);
+    let scales = setups.iter().any(Setup::scales);
     let accuracy_only = pictures.accuracy.is_some() && !scales;
     let kind = if accuracy_only { "Accuracy" } else { "Scaling" };
     let _ = writeln!(out, "# {kind} report: study `{}`\n", first.study);
@@ -253,7 +251,8 @@ fn bold_if(bold: bool, text: String) -> String {
     if bold { format!("**{text}**") } else { text }
 }
 
-fn describe(setup: &Setup) -> String {
+/// One line naming a setup: scene, n, steps, dt, packing, broad phase.
+pub fn describe(setup: &Setup) -> String {
     let n = match setup.scaling {
         Scaling::Strong => format!("n = {}", setup.n),
         Scaling::Weak => format!("weak scaling, n = {} × workers", setup.n),

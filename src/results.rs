@@ -1,5 +1,7 @@
-//! `collide results`: a terminal table of a study's records — median wall time and its
-//! spread per configuration, and whether the backends agreed on `state_hash`.
+//! `collide results`: terminal tables of a study's records — median wall time and its
+//! spread per configuration, whether the backends agreed on `state_hash`, and per setup
+//! the seed-style table of median seconds, speedup and efficiency per backend (which
+//! `collide run` prints at its end too).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -7,7 +9,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::bail;
 
+use crate::analysis::{self, Setup};
+use crate::manifest::Scaling;
 use crate::records::{self, Record, STATUS_OK};
+use crate::report::describe;
 
 /// Every record under `path` (a results file, or a study folder of them).
 pub fn load(path: &Path) -> anyhow::Result<Vec<Record>> {
@@ -27,6 +32,80 @@ pub fn load(path: &Path) -> anyhow::Result<Vec<Record>> {
         all.extend(records::read(&file)?);
     }
     Ok(all)
+}
+
+/// What `collide results` prints: [`table`], then [`scaling_table`].
+pub fn summary(records: &[Record]) -> anyhow::Result<String> {
+    let setups = analysis::analyse(records)?;
+    Ok(format!("{}{}", table(records), scaling_table(&setups)))
+}
+
+/// Per setup that scales, the seed's table: one line per worker count, and per backend
+/// the median seconds, the speedup S(p) and the efficiency E(p) (as in the report).
+pub fn scaling_table(setups: &[Setup]) -> String {
+    let mut out = String::new();
+    for setup in setups.iter().filter(|s| s.scales()) {
+        let _ = writeln!(out, "\n{}", describe(setup));
+        let mut workers: Vec<u64> = setup
+            .backends
+            .iter()
+            .flat_map(|b| b.points.iter().map(|p| p.workers))
+            .collect();
+        workers.sort_unstable();
+        workers.dedup();
+        let _ = write!(out, "{:>7}", "workers");
+        for backend in &setup.backends {
+            let _ = write!(
+                out,
+                " {:>12} {:>7} {:>6}",
+                format!("{} s", backend.backend),
+                "S(p)",
+                "E(p)"
+            );
+        }
+        let _ = writeln!(out);
+        for p in workers {
+            let _ = write!(out, "{p:>7}");
+            for backend in &setup.backends {
+                match backend.points.iter().find(|point| point.workers == p) {
+                    // Without a serial or 1-worker run there is no speedup to show.
+                    Some(point) if point.speedup.is_finite() => {
+                        let _ = write!(
+                            out,
+                            " {:>12.4} {:>7.2} {:>5.0}%",
+                            point.median_s,
+                            point.speedup,
+                            100.0 * point.efficiency
+                        );
+                    }
+                    Some(point) => {
+                        let _ = write!(out, " {:>12.4} {:>7} {:>6}", point.median_s, "—", "—");
+                    }
+                    None => {
+                        let _ = write!(out, " {:>12} {:>7} {:>6}", "", "", "");
+                    }
+                }
+            }
+            let _ = writeln!(out);
+        }
+    }
+    if !out.is_empty() {
+        let _ = writeln!(
+            out,
+            "\nMedian seconds of the stepping loop; speedup S(p) against the serial backend \
+             (else the same backend at 1 worker); efficiency E(p) = S(p)/p."
+        );
+    }
+    if setups
+        .iter()
+        .any(|s| s.scales() && s.scaling == Scaling::Weak)
+    {
+        let _ = writeln!(
+            out,
+            "Weak scaling: E(p) = T(1, N₀)/T(p, p·N₀) and S(p) = p·E(p), the scaled speedup."
+        );
+    }
+    out
 }
 
 /// Median of a non-empty slice.

@@ -61,6 +61,7 @@ pub fn run_study(
             println!("{text}");
         }
     };
+    let configurations = runnable(study)?;
     let environment = Environment::capture();
     let dir = options.out.join(&study.name);
     std::fs::create_dir_all(&dir).with_context(|| {
@@ -96,19 +97,6 @@ pub fn run_study(
     rows.retain(|r| r.status == STATUS_OK);
     let kept_ok = rows.len();
 
-    let mut configurations: Vec<&Configuration> = study.configurations.iter().collect();
-    if !cfg!(feature = "mpi") {
-        let before = configurations.len();
-        configurations.retain(|c| c.backend != BackendName::Mpi);
-        if configurations.len() < before {
-            // Not a progress note: the study measures less than its manifest asks.
-            eprintln!(
-                "warning: skipping {} MPI configuration(s): this collide was built without \
-                 `--features mpi`",
-                before - configurations.len()
-            );
-        }
-    }
     for configuration in &configurations {
         if configuration.backend != BackendName::Serial
             && configuration.workers > environment.logical_cores
@@ -266,6 +254,39 @@ pub struct Calibration {
     pub calibration_s: f64,
     /// CPU seconds; null where unknown.
     pub calibration_cpu_s: Option<f64>,
+}
+
+/// How to get MPI support into a build without the `mpi` feature (completes "to run
+/// them, ...").
+pub const ENABLE_MPI: &str = "install OpenMPI and libclang (`sudo apt-get install libopenmpi-dev \
+     openmpi-bin libclang-dev`) and add `--features mpi` to the cargo command";
+
+/// The configurations this build can run: without the `mpi` feature the MPI ones are
+/// skipped with a one-line warning, and a study left with nothing to run is an error.
+fn runnable(study: &Study) -> anyhow::Result<Vec<&Configuration>> {
+    let mut configurations: Vec<&Configuration> = study.configurations.iter().collect();
+    if cfg!(feature = "mpi") {
+        return Ok(configurations);
+    }
+    let before = configurations.len();
+    configurations.retain(|c| c.backend != BackendName::Mpi);
+    let skipped = before - configurations.len();
+    if configurations.is_empty() {
+        bail!(
+            "{}: every configuration uses the MPI backend, and this collide was built without \
+             MPI, so nothing was run or written; {ENABLE_MPI}, or list other backends under \
+             `[backends]` (`serial = true`, `rayon = [1, 2]`)",
+            study.manifest.display()
+        );
+    }
+    if skipped > 0 {
+        // Not a progress note: the study measures less than its manifest asks.
+        eprintln!(
+            "warning: skipping {skipped} MPI configuration(s), as this collide was built \
+             without MPI; to run them, {ENABLE_MPI}"
+        );
+    }
+    Ok(configurations)
 }
 
 /// xxh3 of a manifest's text, as recorded in `manifest_hash`.

@@ -54,7 +54,7 @@ pub enum SceneFileError {
         source: std::io::Error,
     },
     #[error(
-        "{path}:{line}: {message}; see the README section Scene files for the keys and values a scene accepts"
+        "{path}:{line}: {message}; see docs/guide.md, Scene files, for the keys and values a scene accepts"
     )]
     Syntax {
         path: PathBuf,

@@ -397,7 +397,7 @@ fn event_and_small_step_methods_agree_on_a_dilute_gas() {
     // a step (a fraction ~(v·dt/σ)²/8 of them), so the counts differ by chaos alone:
     // the trajectories decorrelate, and two independent counts of ~4300 differ by
     // ~1.5·√2 % at one σ. Tolerance 5%, about 2.5 σ. The step run must also miss
-    // fewer than 1e-3 of its collisions (the default tolerance of issue 6).
+    // fewer than 1e-3 of its collisions (the default `missed_tolerance`).
     let text = std::fs::read_to_string("experiments/scenes/seed-1000.toml")
         .unwrap()
         .replace("dt = 0.1", "dt = 0.01")

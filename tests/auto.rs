@@ -1,4 +1,4 @@
-//! `method = "auto"` and `dt = "auto"` under `missed_tolerance` (issue 6, part 5): the
+//! `method = "auto"` and `dt = "auto"` under `missed_tolerance`: the
 //! choice follows the stated cost model, gravity forces the step method, the chosen dt
 //! keeps the missed fraction under the tolerance, the choice is deterministic, and bad
 //! tolerances are input errors.
@@ -107,7 +107,7 @@ fn method_auto_picks_the_step_method_when_the_event_pilot_collapses() {
 
 #[test]
 fn the_chosen_dt_keeps_the_missed_fraction_under_the_tolerance_on_a_fresh_run() {
-    // Packing 0.3 misses more than 10⁻³ at the seed's step (README), so the ladder has to
+    // Packing 0.3 misses more than 10⁻³ at the seed's step (docs/accuracy.md), so the ladder has to
     // come down. The fresh run covers the pilot's span (64 r_min / v_max, 64/f steps),
     // from the same initial state: the tolerance is a statement about that span.
     let text = gas(0.3, "dt = \"auto\"\nmissed_tolerance = 1e-3\n");

@@ -7,7 +7,7 @@ use collide::sim::scene::{GasSpec, MassRule, RadiusDistribution};
 use collide::sim::{Boundary, Broadphase, Physics};
 use collide::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
 
-/// Dilute and dense, walls and periodic, elastic and inelastic: the cases the issue names.
+/// Dilute and dense, walls and periodic, elastic and inelastic.
 fn scenes() -> Vec<(String, RunSpec)> {
     let mut scenes = Vec::new();
     for boundary in [Boundary::Walls, Boundary::Periodic] {

@@ -61,7 +61,7 @@ fn a_missing_or_incompatible_baseline_is_an_error_with_exit_code_2() {
 
 /// The injections are a whole step's time (1.0, not 0.25): this test runs beside the
 /// rest of the suite on a shared 2-core machine, where a few tens of milliseconds per
-/// run can swing by 25% on their own. The README gives the smallest slowdown the real
+/// run can swing by 25% on their own. docs/ci-check.md gives the smallest slowdown the real
 /// manifest catches.
 #[test]
 fn an_injected_slowdown_regresses_and_an_injected_speed_up_improves() {
@@ -83,7 +83,7 @@ fn an_injected_slowdown_regresses_and_an_injected_speed_up_improves() {
     let stdout = text(&slower.stdout);
     assert!(stdout.contains("**regressed**"), "{stdout}");
     assert!(dir.path().join("out/summary.md").exists());
-    // Not asserted: the A/A verdict, which is a measured rate (README), not a certainty.
+    // Not asserted: the A/A verdict, which is a measured rate (docs/ci-check.md), not a certainty.
     assert_ne!(same.status.code(), Some(2), "{}", text(&same.stderr));
 
     // A baseline with the slowdown injected, then the plain build: a speed-up.

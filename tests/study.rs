@@ -98,7 +98,13 @@ fn a_study_records_every_repetition_and_resume_runs_only_what_is_missing() {
     let run = |extra: &[&str]| {
         collide(
             &[
-                &["run", path.as_str(), "--out", out.to_str().unwrap()],
+                &[
+                    "run",
+                    path.as_str(),
+                    "--out",
+                    out.to_str().unwrap(),
+                    "--no-report",
+                ],
                 extra,
             ]
             .concat(),
@@ -168,7 +174,7 @@ fn an_accuracy_study_runs_both_methods_and_reports_pareto_and_stability_figures(
          observe = [\"accuracy\", \"accuracy\", \"timing\"]\n\
          zip = [\"dt\", \"steps\", \"method\", \"observe\"]\n[backends]\nserial = true\n",
     );
-    let run = collide(&["run", &path, "--out", out.to_str().unwrap()]);
+    let run = collide(&["run", &path, "--out", out.to_str().unwrap(), "--no-report"]);
     assert!(
         run.status.success(),
         "{}",
@@ -219,7 +225,7 @@ fn a_run_over_its_timeout_is_recorded_as_timed_out_and_fails_the_study() {
         "repetitions = 1\nwarmups = 0\ntimeout_s = 0.2\n[sweep]\nsteps = [10000000]\n\
          [backends]\nserial = true\n",
     );
-    let result = collide(&["run", &path, "--out", out.to_str().unwrap()]);
+    let result = collide(&["run", &path, "--out", out.to_str().unwrap(), "--no-report"]);
     assert!(!result.status.success());
     let stderr = String::from_utf8(result.stderr).unwrap();
     assert!(stderr.contains("1 run(s) failed"), "{stderr}");
@@ -237,6 +243,83 @@ fn an_unwritable_results_folder_is_a_clear_error() {
     assert!(
         stderr.contains("cannot create the results folder") && stderr.contains("--out"),
         "{stderr}"
+    );
+}
+
+#[test]
+fn a_study_ends_in_its_scaling_table_and_its_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    let reports = dir.path().join("reports");
+    let path = manifest(
+        dir.path(),
+        "repetitions = 1\nwarmups = 0\n[backends]\nserial = true\nrayon = [1, 2]\nmpi = [2]\n",
+    );
+    let run = collide(&[
+        "run",
+        &path,
+        "--out",
+        out.to_str().unwrap(),
+        "--reports",
+        reports.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8(run.stdout).unwrap();
+    let stderr = String::from_utf8(run.stderr).unwrap();
+    assert!(run.status.success(), "{stderr}");
+    // The seed's table: workers × median seconds per backend, speedup, efficiency.
+    let header = stdout
+        .lines()
+        .find(|line| line.trim_start().starts_with("workers") && line.contains("serial s"))
+        .unwrap_or_else(|| panic!("no scaling table in {stdout}"));
+    assert!(
+        header.contains("rayon s") && header.contains("S(p)") && header.contains("E(p)"),
+        "{header}"
+    );
+    let report = reports.join("tiny").join("report.md");
+    assert!(
+        stdout.contains(&format!("report written to {}", report.display())),
+        "{stdout}"
+    );
+    let text = std::fs::read_to_string(&report).unwrap();
+    assert!(text.contains("Speedup, efficiency"), "{text}");
+    assert!(reports.join("tiny").join("setup-1-speedup.png").exists());
+    if cfg!(feature = "mpi") {
+        assert!(header.contains("mpi s"), "{header}");
+    } else {
+        // Said once, in one line, with how to get them.
+        let warnings: Vec<&str> = stderr.lines().filter(|l| l.contains("MPI")).collect();
+        assert_eq!(warnings.len(), 1, "{stderr}");
+        assert!(
+            warnings[0].contains("skipping 1 MPI configuration")
+                && warnings[0].contains("--features mpi"),
+            "{stderr}"
+        );
+    }
+}
+
+#[cfg(not(feature = "mpi"))]
+#[test]
+fn a_study_of_mpi_configurations_only_is_an_error_without_mpi() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    let path = manifest(dir.path(), "[backends]\nmpi = [1, 2]\n");
+    let run = collide(&["run", &path, "--out", out.to_str().unwrap(), "--no-report"]);
+    assert_eq!(run.status.code(), Some(2));
+    let stderr = String::from_utf8(run.stderr).unwrap();
+    for fragment in [
+        "tiny.toml",
+        "every configuration uses the MPI backend",
+        "--features mpi",
+    ] {
+        assert!(stderr.contains(fragment), "`{fragment}` not in {stderr}");
+    }
+    assert!(
+        !stderr.contains(".parquet"),
+        "names a file it never wrote: {stderr}"
+    );
+    assert!(
+        !out.join("tiny").exists(),
+        "wrote a results folder for nothing"
     );
 }
 
@@ -337,7 +420,8 @@ fn ctrl_c_stops_the_running_child_and_keeps_what_was_measured() {
         "repetitions = 1\nwarmups = 0\n[sweep]\nsteps = [20, 10000000]\n[backends]\nserial = true\n",
     );
     let mut study = std::process::Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args(["run", &path, "--quiet", "--out", out.to_str().unwrap()])
+        .args(["run", &path, "--quiet", "--no-report", "--out"])
+        .arg(&out)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())

@@ -10,5 +10,6 @@ mod mpi;
 mod physics;
 mod report;
 mod resting;
+mod schema;
 mod study;
 mod view;
