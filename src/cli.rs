@@ -69,6 +69,15 @@ Examples:
   An animated GIF of 200 steps in 40 frames
     collide render experiments/scenes/seed-1000.toml --steps 200 --gif run.gif --frames 40";
 
+const VIEW_EXAMPLES: &str = "\
+Examples:
+  Watch the seed's 1000 disks, on 2 threads
+    collide view experiments/scenes/seed-1000.toml --threads 2
+  Measure the frame rate: 300 frames without a cap, figures to a JSON file
+    collide view experiments/scenes/seed-1000.toml --n 100000 --frames 300 --max-fps 0 --stats view.json
+  Without a screen, on a virtual display
+    xvfb-run -a collide view experiments/scenes/seed-1000.toml --frames 100 --screenshot last.png";
+
 const CHECK_EXAMPLES: &str = "\
 Examples:
   Time experiments/ci.toml and compare it with results/baseline/
@@ -99,6 +108,7 @@ pub enum Command {
     /// Watch a scene run in a window: disks coloured by speed, frames and steps per
     /// second. Keys: space pause, . one step, [ ] steps per frame, + - zoom, arrows pan,
     /// 0 whole box, p screenshot, Esc quit.
+    #[command(after_help = VIEW_EXAMPLES)]
     View(ViewArgs),
     /// CI timing check: run a small manifest and compare it with a recorded baseline
     /// (exit 0: nothing regressed, 1: a regression, 2: an error).
