@@ -8,5 +8,6 @@ mod cli;
 #[cfg(feature = "mpi")]
 mod mpi;
 mod physics;
+mod reliability;
 mod report;
 mod study;
