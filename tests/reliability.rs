@@ -9,8 +9,10 @@ use std::time::{Duration, Instant};
 
 use collide::limits::{MAX_WORKERS_PER_CORE, Machine};
 use collide::records;
+use rustix::process::Signal;
 
 use crate::cli::{collide, scene_file};
+use crate::study::interrupt_after_first_row;
 
 const SCENE: &str = "[scene]\nn = 200\npacking = 0.1\nseed = 3\n[method]\ndt = 0.1\nsteps = 20\n";
 
@@ -23,17 +25,39 @@ fn inline_scene(name: &str) -> String {
 }
 
 /// Runs `collide ARGS`, which must fail with exit 2 within a few seconds; its stderr.
+/// A run that is still going then is killed first: a bad input that is accepted (say
+/// n = 10⁹) must not go on to fill the machine.
 fn refused(args: &[&str]) -> String {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_collide"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
     let started = Instant::now();
-    let out = collide(args);
-    assert!(
-        started.elapsed() < Duration::from_secs(5),
-        "{args:?} took {:?}",
-        started.elapsed()
-    );
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed() > Duration::from_secs(5) {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            panic!("{args:?} was still running after 5 s");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8(out.stderr).unwrap();
     assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
     stderr
+}
+
+/// `collide run MANIFEST --out OUT`, which must be refused; its stderr.
+fn run_refused(manifest: &Path, out: &Path) -> String {
+    refused(&[
+        "run",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ])
 }
 
 /// No Rust debug text (`IoError(Os { code: 20, .. })`) and no reason said twice.
@@ -89,12 +113,7 @@ fn names_that_would_escape_the_results_folder_are_refused_before_anything_runs()
             (as_study, "`name`", ":1:"),
         ] {
             let manifest = scene_file(dir.path(), "m.toml", &text);
-            let stderr = refused(&[
-                "run",
-                manifest.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-            ]);
+            let stderr = run_refused(&manifest, &out);
             assert!(
                 stderr.contains(&format!("m.toml{line}"))
                     && stderr.contains(field)
@@ -229,12 +248,7 @@ fn runs_too_large_for_the_machine_are_refused_before_allocating() {
         inline_scene("gas")
     );
     let manifest = scene_file(dir.path(), "big.toml", &text);
-    let stderr = refused(&[
-        "run",
-        manifest.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let stderr = run_refused(&manifest, &out);
     assert!(
         stderr.contains("big.toml:6:")
             && stderr.contains("n = 1000000000")
@@ -377,8 +391,6 @@ fn studies_started_together_into_one_folder_both_keep_all_their_rows() {
 
 #[test]
 fn an_interrupted_study_says_what_it_kept_and_how_to_continue() {
-    use std::os::unix::process::CommandExt;
-
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out folder");
     scene_file(dir.path(), "scene.toml", SCENE);
@@ -386,34 +398,8 @@ fn an_interrupted_study_says_what_it_kept_and_how_to_continue() {
     let text = "name = \"tiny\"\nrepetitions = 1\nwarmups = 0\n[[scenes]]\nfile = \"scene.toml\"\n\
                 [sweep]\nsteps = [20, 10000000]\n[backends]\nserial = true\n";
     let manifest = scene_file(dir.path(), "tiny.toml", text);
-    for signal in [rustix::process::Signal::TERM, rustix::process::Signal::INT] {
-        let study = Command::new(env!("CARGO_BIN_EXE_collide"))
-            .args([
-                "run",
-                manifest.to_str().unwrap(),
-                "--quiet",
-                "--out",
-                out.to_str().unwrap(),
-            ])
-            .current_dir(env!("CARGO_MANIFEST_DIR"))
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .process_group(0)
-            .spawn()
-            .unwrap();
-        let started = Instant::now();
-        let before = records::files_in(&out.join("tiny")).map_or(0, |f| f.len());
-        while records::files_in(&out.join("tiny")).map_or(0, |f| f.len()) == before {
-            assert!(
-                started.elapsed() < Duration::from_secs(20),
-                "no results file appeared"
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        std::thread::sleep(Duration::from_millis(300));
-        let group = rustix::process::Pid::from_raw(study.id() as i32).unwrap();
-        rustix::process::kill_process_group(group, signal).unwrap();
-        let ended = study.wait_with_output().unwrap();
+    for signal in [Signal::TERM, Signal::INT] {
+        let ended = interrupt_after_first_row(manifest.to_str().unwrap(), &out, "tiny", signal);
         assert_eq!(ended.status.code(), Some(130), "{signal:?}");
         let stderr = String::from_utf8(ended.stderr).unwrap();
         let newest = records::files_in(&out.join("tiny"))
