@@ -17,7 +17,7 @@ use crate::limits::{Machine, WorkerSource, check_memory, check_workers};
 use crate::names::check_name;
 use crate::scene_file::{self, DtValue, Overrides};
 use crate::sim::Broadphase;
-use crate::spec::{MethodChoice, Observe, RunSpec, SceneSource};
+use crate::spec::{Footprint, MethodChoice, Observe, RunSpec, SceneSource};
 
 /// A validated study: what to run, how often, and in which order.
 #[derive(Clone, Debug, PartialEq)]
@@ -74,6 +74,8 @@ pub struct Configuration {
     /// Run worker counts above the ceiling of [`crate::limits`] (`[backends]
     /// oversubscribe = true`); not part of the key.
     pub oversubscribe: bool,
+    /// Memory and placement time of each of its runs, as checked against the machine.
+    pub footprint: Footprint,
 }
 
 impl Configuration {
@@ -320,7 +322,8 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
                 } else {
                     1
                 };
-                check_memory(&spec.footprint(copies), machine).map_err(in_scene)?;
+                let footprint = spec.footprint(copies);
+                check_memory(&footprint, machine).map_err(in_scene)?;
                 if spec.method.method.may_be_event() && backend != BackendName::Serial {
                     let at = raw
                         .sweep
@@ -343,6 +346,7 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
                     backend,
                     workers,
                     oversubscribe: raw.backends.get_ref().oversubscribe,
+                    footprint,
                 };
                 if !seen.insert(configuration.key()) {
                     return Err(invalid(

@@ -145,6 +145,11 @@ pub fn run_study(
             ));
         }
     }
+    for configuration in &configurations {
+        if let Some(placement) = crate::limits::placement_note(&configuration.footprint) {
+            note(&format!("{placement} ({}, every run)", configuration.key()));
+        }
+    }
     let scene_files = materialize_scenes(&dir, &configurations)?;
     let todo: Vec<(u32, usize)> = (0..study.repetitions)
         .flat_map(|rep| (0..configurations.len()).map(move |c| (rep, c)))
