@@ -11,7 +11,8 @@ use crate::check::{CheckOptions, CheckOutcome};
 use crate::cli::{
     BackendName, CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs, ViewArgs,
 };
-use crate::output::{write_atomically, write_state_csv};
+use crate::limits::{Machine, WorkerSource, check_memory, check_workers, placement_note};
+use crate::output::{check_output_file, write_atomically, write_state_csv};
 use crate::records::{self, Record, STATUS_OK};
 use crate::runner::{Calibration, RunOptions};
 use crate::scene_file;
@@ -79,7 +80,13 @@ fn render_scene(args: &RenderArgs) -> anyhow::Result<()> {
             "nothing to draw; add --png FILE (the disks after the run) and/or --gif FILE (the run)"
         );
     }
+    for (flag, path) in [("--png", &args.png), ("--gif", &args.gif)] {
+        if let Some(path) = path {
+            check_output_file(path, flag)?;
+        }
+    }
     let spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
+    check_fits(&args.scene, &spec, 1, &Machine::this())?;
     let prepared = spec
         .prepare()
         .with_context(|| format!("{}", args.scene.display()))?;
@@ -140,10 +147,19 @@ const SCENE_PICTURE: &str = "scene.png";
 fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
     let records = results::load(&args.path)?;
     let study = records.first().map_or("study", |r| r.study.as_str());
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| Path::new("reports").join(study));
+    let out = match &args.out {
+        Some(out) => out.clone(),
+        None => {
+            // The name comes from a file, which anyone may have written.
+            crate::names::check_name(study).map_err(|reason| {
+                anyhow::anyhow!(
+                    "{}: the study name {reason}; choose the report folder with --out",
+                    args.path.display()
+                )
+            })?;
+            Path::new("reports").join(study)
+        }
+    };
     report_into(&records, &args.path, &out)
 }
 
@@ -256,8 +272,18 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
 }
 
 fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
-    let backend = backend_spec(args)?;
+    let machine = Machine::this();
+    let backend = backend_spec(args, &machine)?;
+    if let Some(path) = &args.dump {
+        check_output_file(path, "--dump")?;
+    }
     let mut spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
+    // Every rank of an MPI run builds all the disks.
+    let copies = match backend {
+        BackendSpec::Mpi { ranks } => ranks.map_or_else(logical_cores, NonZeroUsize::get),
+        BackendSpec::Serial | BackendSpec::Rayon { .. } => 1,
+    };
+    check_fits(&args.scene, &spec, copies, &machine)?;
     if spec.method.method.may_be_event() && backend != BackendSpec::Serial {
         bail!(
             "{}: the event method (which method auto may choose) runs on the serial backend \
@@ -295,6 +321,22 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         if let Some(path) = &args.dump {
             println!("final state written to {}", path.display());
         }
+    }
+    Ok(())
+}
+
+/// Refuses a run whose memory cannot fit the machine, and announces a long placement.
+fn check_fits(
+    scene: &std::path::Path,
+    spec: &crate::spec::RunSpec,
+    copies: usize,
+    machine: &Machine,
+) -> anyhow::Result<()> {
+    let footprint = spec.footprint(copies);
+    check_memory(&footprint, machine)
+        .map_err(|reason| anyhow::anyhow!("{}: `n`: {reason}", scene.display()))?;
+    if let Some(note) = placement_note(&footprint) {
+        eprintln!("{note}");
     }
     Ok(())
 }
@@ -353,14 +395,25 @@ fn logical_cores() -> usize {
     crate::backend::machine_cores()
 }
 
-/// The backend the flags ask for; worker counts only go with the backend they count.
-fn backend_spec(args: &SimulateArgs) -> anyhow::Result<BackendSpec> {
+/// The backend the flags ask for; worker counts only go with the backend they count, and
+/// stay under the machine's ceiling unless `--oversubscribe` insists.
+fn backend_spec(args: &SimulateArgs, machine: &Machine) -> anyhow::Result<BackendSpec> {
     let name = args.backend;
     if args.threads.is_some() && name != BackendName::Rayon {
         bail!("--threads sets the rayon pool size; add `--backend rayon` or drop --threads");
     }
     if args.ranks.is_some() && name != BackendName::Mpi {
         bail!("--ranks sets the MPI process count; add `--backend mpi` or drop --ranks");
+    }
+    for (flag, workers) in [("--threads", args.threads), ("--ranks", args.ranks)] {
+        if let Some(workers) = workers {
+            let source = WorkerSource {
+                field: flag,
+                insist: "add --oversubscribe",
+            };
+            check_workers(workers.get(), machine, args.oversubscribe, source)
+                .map_err(anyhow::Error::msg)?;
+        }
     }
     Ok(match name {
         BackendName::Serial => BackendSpec::Serial,

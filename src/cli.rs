@@ -248,6 +248,10 @@ pub struct SimulateArgs {
     /// MPI ranks to launch (with --backend mpi; default under mpirun: its world size).
     #[arg(long, value_parser = parse_workers)]
     pub ranks: Option<NonZeroUsize>,
+    /// Allow more than 8 threads or ranks per logical core (refused otherwise: such a
+    /// run measures the scheduler rather than the simulation).
+    #[arg(long)]
+    pub oversubscribe: bool,
     /// MPI launcher and its options, followed by `-n RANKS` and this program
     /// (e.g. "mpirun --bind-to core", or "mpiexec" for MPICH).
     #[arg(long, env = "COLLIDE_MPI_LAUNCHER", default_value = "mpirun")]

@@ -53,7 +53,7 @@ impl Environment {
             cpu_model,
             logical_cores: machine_cores(),
             physical_cores: physical_cores(&cpuinfo).unwrap_or_else(machine_cores),
-            memory_bytes: memory_bytes(&read("/proc/meminfo")).unwrap_or(0),
+            memory_bytes: machine_memory_bytes().unwrap_or(0),
             os: os_name(),
             rustc: env!("COLLIDE_RUSTC_VERSION").to_owned(),
             profile: if cfg!(debug_assertions) {
@@ -73,6 +73,16 @@ impl Environment {
             load_average_start: load_average(),
         }
     }
+}
+
+/// The machine's memory (`MemTotal`), if known.
+pub fn machine_memory_bytes() -> Option<u64> {
+    memory_bytes(&read("/proc/meminfo"))
+}
+
+/// The memory limit of this process's control group (cgroup v2 `memory.max`), if any.
+pub fn memory_limit_bytes() -> Option<u64> {
+    read("/sys/fs/cgroup/memory.max").trim().parse().ok()
 }
 
 /// The 1-minute load average now (NaN where unknown).

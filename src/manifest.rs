@@ -13,9 +13,11 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use crate::cli::BackendName;
+use crate::limits::{Machine, WorkerSource, check_memory, check_workers};
+use crate::names::check_name;
 use crate::scene_file::{self, DtValue, Overrides};
 use crate::sim::Broadphase;
-use crate::spec::{MethodChoice, Observe, RunSpec, SceneSource};
+use crate::spec::{Footprint, MethodChoice, Observe, RunSpec, SceneSource};
 
 /// A validated study: what to run, how often, and in which order.
 #[derive(Clone, Debug, PartialEq)]
@@ -69,6 +71,11 @@ pub struct Configuration {
     pub backend: BackendName,
     /// Threads (rayon), ranks (MPI) or 1 (serial).
     pub workers: usize,
+    /// Run worker counts above the ceiling of [`crate::limits`] (`[backends]
+    /// oversubscribe = true`); not part of the key.
+    pub oversubscribe: bool,
+    /// Memory and placement time of each of its runs, as checked against the machine.
+    pub footprint: Footprint,
 }
 
 impl Configuration {
@@ -146,6 +153,9 @@ impl Configuration {
             BackendName::Rayon => push("--threads", Some(self.workers.to_string())),
             BackendName::Mpi => push("--ranks", Some(self.workers.to_string())),
         }
+        if self.oversubscribe {
+            args.push("--oversubscribe".to_owned());
+        }
         args
     }
 }
@@ -175,7 +185,7 @@ struct RawManifest {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawScene {
-    name: Option<String>,
+    name: Option<Spanned<String>>,
     file: Option<String>,
     scene: Option<toml::Table>,
     method: Option<toml::Table>,
@@ -206,9 +216,13 @@ struct RawBackends {
     rayon: Vec<i64>,
     #[serde(default)]
     mpi: Vec<i64>,
+    /// Allow worker counts above the ceiling of [`crate::limits`].
+    #[serde(default)]
+    oversubscribe: bool,
 }
 
-/// Reads and validates the manifest at `path`: the study, and the text it came from.
+/// Reads and validates the manifest at `path` for this machine: the study, and the text
+/// it came from.
 pub fn load(path: &Path) -> anyhow::Result<(Study, String)> {
     let text = std::fs::read_to_string(path).map_err(|err| {
         anyhow::anyhow!(
@@ -216,11 +230,12 @@ pub fn load(path: &Path) -> anyhow::Result<(Study, String)> {
             path.display()
         )
     })?;
-    Ok((parse(path, &text)?, text))
+    Ok((parse(path, &text, &Machine::this())?, text))
 }
 
-/// Validates manifest text; scene files are found relative to `path`'s folder.
-pub fn parse(path: &Path, text: &str) -> Result<Study, ManifestError> {
+/// Validates manifest text for `machine` (every configuration's workers and memory must
+/// fit it); scene files are found relative to `path`'s folder.
+pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, ManifestError> {
     let at = |offset: usize| format!("{}:{}", path.display(), line_of(text, offset));
     let invalid = |offset: usize, message: String| ManifestError::Invalid {
         location: at(offset),
@@ -236,18 +251,8 @@ pub fn parse(path: &Path, text: &str) -> Result<Study, ManifestError> {
         )
     })?;
     let name = raw.name.get_ref().trim().to_owned();
-    let name_ok = !name.is_empty()
-        && name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
-    if !name_ok {
-        return Err(invalid(
-            raw.name.span().start,
-            format!(
-                "`name` \"{name}\" must be letters, digits, - and _ only (it names the results folder)"
-            ),
-        ));
-    }
+    check_name(&name)
+        .map_err(|reason| invalid(raw.name.span().start, format!("`name` {reason}")))?;
     let count = |value: &Option<Spanned<i64>>, field: &str, default: i64, min: i64| {
         let v = value.as_ref().map_or(default, |v| *v.get_ref());
         if v < min {
@@ -274,7 +279,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Study, ManifestError> {
         .as_ref()
         .map_or(Scaling::Strong, |s| *s.get_ref());
 
-    let backends = backend_list(raw.backends.get_ref())
+    let backends = backend_list(raw.backends.get_ref(), machine)
         .map_err(|message| invalid(raw.backends.span().start, message))?;
     let points = sweep_points(&raw.sweep).map_err(|(offset, message)| invalid(offset, message))?;
     if raw.scenes.get_ref().is_empty() {
@@ -288,6 +293,10 @@ pub fn parse(path: &Path, text: &str) -> Result<Study, ManifestError> {
     let mut seen = BTreeSet::new();
     for entry in raw.scenes.get_ref() {
         let offset = entry.span().start;
+        if let Some(name) = &entry.get_ref().name {
+            check_name(name.get_ref())
+                .map_err(|reason| invalid(name.span().start, format!("`scenes.name` {reason}")))?;
+        }
         let (scene, input) =
             scene_input(entry.get_ref(), folder).map_err(|message| invalid(offset, message))?;
         for point in &points {
@@ -300,12 +309,21 @@ pub fn parse(path: &Path, text: &str) -> Result<Study, ManifestError> {
                     overrides.n = Some(base * workers as i64);
                 }
                 // Every configuration is a valid scene: the same checks as `collide simulate`.
-                let spec = load_scene(&input, &overrides).map_err(|message| {
+                let in_scene = |message: String| {
                     invalid(
                         offset,
                         format!("scene `{scene}` with {}: {message}", describe(&overrides)),
                     )
-                })?;
+                };
+                let spec = load_scene(&input, &overrides).map_err(in_scene)?;
+                // Every rank of an MPI run builds all the disks.
+                let copies = if backend == BackendName::Mpi {
+                    workers
+                } else {
+                    1
+                };
+                let footprint = spec.footprint(copies);
+                check_memory(&footprint, machine).map_err(in_scene)?;
                 if spec.method.method.may_be_event() && backend != BackendName::Serial {
                     let at = raw
                         .sweep
@@ -327,6 +345,8 @@ pub fn parse(path: &Path, text: &str) -> Result<Study, ManifestError> {
                     overrides,
                     backend,
                     workers,
+                    oversubscribe: raw.backends.get_ref().oversubscribe,
+                    footprint,
                 };
                 if !seen.insert(configuration.key()) {
                     return Err(invalid(
@@ -353,8 +373,9 @@ pub fn parse(path: &Path, text: &str) -> Result<Study, ManifestError> {
     })
 }
 
-/// (backend, workers) pairs, in manifest order.
-fn backend_list(raw: &RawBackends) -> Result<Vec<(BackendName, usize)>, String> {
+/// (backend, workers) pairs, in manifest order, each within the worker ceiling of
+/// `machine` unless `oversubscribe` is set.
+fn backend_list(raw: &RawBackends, machine: &Machine) -> Result<Vec<(BackendName, usize)>, String> {
     let mut list = Vec::new();
     if raw.serial {
         list.push((BackendName::Serial, 1));
@@ -369,6 +390,11 @@ fn backend_list(raw: &RawBackends) -> Result<Vec<(BackendName, usize)>, String> 
                     "`backends.{field}` lists {count}; worker counts are whole numbers of at least 1"
                 ));
             }
+            let source = WorkerSource {
+                field: &format!("`backends.{field}`"),
+                insist: "set `oversubscribe = true` in [backends]",
+            };
+            check_workers(count as usize, machine, raw.oversubscribe, source)?;
             list.push((backend, count as usize));
         }
     }
@@ -478,11 +504,12 @@ fn scene_input(raw: &RawScene, folder: &Path) -> Result<(String, SceneInput), St
             }
             let path = folder.join(file);
             let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
-            let name = raw.name.clone().or(stem).unwrap_or_else(|| file.clone());
+            let given = raw.name.as_ref().map(|name| name.get_ref().clone());
+            let name = given.or(stem).unwrap_or_else(|| file.clone());
             Ok((name, SceneInput::File(path)))
         }
         (None, Some(scene)) => {
-            let name = raw.name.clone().ok_or(
+            let name = raw.name.as_ref().map(|name| name.get_ref().clone()).ok_or(
                 "an inline scene needs a `name` (it labels the results); add `name = \"...\"`",
             )?;
             let mut document = toml::Table::new();
@@ -572,10 +599,17 @@ mod tests {
     const INLINE: &str = "[[scenes]]\nname = \"gas\"\n[scenes.scene]\nn = 100\npacking = 0.1\n\
                           [scenes.method]\ndt = 0.1\nsteps = 10\n";
 
+    /// A machine with room for every test manifest here.
+    const MACHINE: Machine = Machine {
+        logical_cores: 2,
+        memory_bytes: 1 << 34,
+    };
+
     fn study(head: &str) -> Study {
         parse(
             Path::new("m.toml"),
             &format!("name = \"m\"\n{head}\n{INLINE}"),
+            &MACHINE,
         )
         .unwrap()
     }
@@ -684,7 +718,9 @@ mod tests {
         // A negative tc names the scene, the sweep value and the fix.
         let bad =
             format!("name = \"m\"\n[sweep]\ntc = [-1.0]\n[backends]\nserial = true\n{INLINE}");
-        let err = parse(Path::new("m.toml"), &bad).unwrap_err().to_string();
+        let err = parse(Path::new("m.toml"), &bad, &MACHINE)
+            .unwrap_err()
+            .to_string();
         assert!(
             err.contains("tc = -1")
                 && err.contains("method.tc")
@@ -692,7 +728,9 @@ mod tests {
             "{err}"
         );
         let empty = format!("name = \"m\"\n[sweep]\ntc = []\n[backends]\nserial = true\n{INLINE}");
-        let err = parse(Path::new("m.toml"), &empty).unwrap_err().to_string();
+        let err = parse(Path::new("m.toml"), &empty, &MACHINE)
+            .unwrap_err()
+            .to_string();
         assert!(err.starts_with("m.toml:3: `sweep.tc` is empty"), "{err}");
     }
 
@@ -701,7 +739,9 @@ mod tests {
         let text = format!(
             "name = \"m\"\n[sweep]\nmethod = [\"step\", \"event\"]\n[backends]\nserial = true\nrayon = [2]\n{INLINE}"
         );
-        let err = parse(Path::new("m.toml"), &text).unwrap_err().to_string();
+        let err = parse(Path::new("m.toml"), &text, &MACHINE)
+            .unwrap_err()
+            .to_string();
         assert!(err.starts_with("m.toml:3: "), "{err}");
         assert!(
             err.contains("serial backend only") && err.contains("rayon"),
@@ -710,7 +750,9 @@ mod tests {
         let bad = format!(
             "name = \"m\"\n[sweep]\nmethod = [\"exact\"]\n[backends]\nserial = true\n{INLINE}"
         );
-        let err = parse(Path::new("m.toml"), &bad).unwrap_err().to_string();
+        let err = parse(Path::new("m.toml"), &bad, &MACHINE)
+            .unwrap_err()
+            .to_string();
         assert!(err.starts_with("m.toml:3: "), "{err}");
     }
 }

@@ -1,12 +1,13 @@
 //! Child processes under a timeout: output captured, each child in its own process
 //! group so that everything it starts (an MPI launcher's ranks) can be stopped with it,
-//! on timeout or when collide itself is interrupted (Ctrl-C, SIGTERM).
+//! on timeout or when collide itself is interrupted (Ctrl-C, SIGTERM), which then says
+//! what was kept.
 
 use std::collections::BTreeSet;
 use std::io::Read;
 use std::os::unix::process::CommandExt;
 use std::process::{Command, ExitStatus, Stdio};
-use std::sync::Mutex;
+use std::sync::{Mutex, MutexGuard, PoisonError};
 use std::thread;
 use std::time::{Duration, Instant};
 
@@ -30,16 +31,34 @@ const GRACE: Duration = Duration::from_secs(2);
 /// Process groups of the children now running, for [`stop_children_on_interrupt`].
 static RUNNING: Mutex<BTreeSet<i32>> = Mutex::new(BTreeSet::new());
 
-/// On Ctrl-C or SIGTERM, interrupts every running child's group (a child that launched
-/// MPI ranks stops them in turn), then exits with code 130. Call once, early.
+/// What to print when interrupted; `None`: [`NOTHING_KEPT`].
+static INTERRUPT_NOTE: Mutex<Option<String>> = Mutex::new(None);
+
+/// What an interrupt says before anything is written.
+const NOTHING_KEPT: &str = "interrupted: no run had finished; nothing was written";
+
+/// The note an interrupt prints (e.g. what was kept and how to continue). Hold the guard
+/// while writing results and set the note once they are written: an interrupt waits for
+/// the guard, so it never lands in the middle of a write nor reports a stale count.
+pub fn interrupt_note() -> MutexGuard<'static, Option<String>> {
+    INTERRUPT_NOTE
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+}
+
+/// On Ctrl-C or SIGTERM, waits for any write of results to finish, interrupts every
+/// running child's group (a child that launched MPI ranks stops them in turn), prints
+/// the [`interrupt_note`], then exits with code 130. Call once, early.
 pub fn stop_children_on_interrupt() {
     let installed = ctrlc::set_handler(|| {
+        let note = interrupt_note();
         let groups: Vec<i32> = RUNNING
             .lock()
             .map_or_else(|_| Vec::new(), |g| g.iter().copied().collect());
         for group in groups {
             signal_group(group, Signal::INT);
         }
+        eprintln!("{}", note.as_deref().unwrap_or(NOTHING_KEPT));
         std::process::exit(130);
     });
     // A second call in the same process fails; the first handler stays, which is right.

@@ -3,9 +3,12 @@
 
 use std::path::Path;
 
-use anyhow::{Context, anyhow};
+use anyhow::anyhow;
 use plotters::coord::Shift;
+use plotters::drawing::DrawingAreaErrorKind;
 use plotters::prelude::*;
+use plotters_backend::DrawingErrorKind;
+use plotters_bitmap::BitMapBackendError;
 
 use crate::sim::engine::Engine;
 use crate::sim::{Boundary, Particles, Scene};
@@ -102,9 +105,27 @@ pub fn png_after_run(prepared: &PreparedRun, path: &Path) -> anyhow::Result<()> 
     }
     let area = BitMapBackend::new(path, Frame::of(scene).size).into_drawing_area();
     draw_state(&area, scene, &particles, fast)?;
-    area.present()
-        .map_err(|e| anyhow!("{e}"))
-        .with_context(|| format!("cannot write {}", path.display()))
+    area.present().map_err(|e| picture_error(path, e))
+}
+
+/// Why a picture could not be written to `path`, in words (plotters' own text of its
+/// bitmap errors is a debug dump).
+pub fn picture_error(path: &Path, err: DrawingAreaErrorKind<BitMapBackendError>) -> anyhow::Error {
+    let reason = match &err {
+        DrawingAreaErrorKind::BackendError(DrawingErrorKind::DrawingError(backend)) => {
+            match backend {
+                BitMapBackendError::IOError(io) => crate::output::io_reason(io),
+                // An image error's text is its I/O error's, when it is one.
+                BitMapBackendError::ImageError(image) => {
+                    crate::output::without_os_code(image.to_string())
+                }
+                BitMapBackendError::GifEncodingError(gif) => gif.to_string(),
+                BitMapBackendError::InvalidBuffer => "the picture buffer is invalid".to_owned(),
+            }
+        }
+        other => other.to_string(),
+    };
+    anyhow!("cannot write {}: {reason}", path.display())
 }
 
 /// Writes an animated GIF of the run: `frames` pictures from the start to the last step.
@@ -112,8 +133,12 @@ pub fn gif_of_run(prepared: &PreparedRun, path: &Path, frames: u32) -> anyhow::R
     let scene = &prepared.scene;
     let fast = fast_speed(&scene.particles);
     let area = BitMapBackend::gif(path, Frame::of(scene).size, 60)
-        .map_err(|e| anyhow!("{e}"))
-        .with_context(|| format!("cannot write {}", path.display()))?
+        .map_err(|e| {
+            picture_error(
+                path,
+                DrawingAreaErrorKind::BackendError(DrawingErrorKind::DrawingError(e)),
+            )
+        })?
         .into_drawing_area();
     let mut particles = scene.particles.clone();
     let mut engine = Engine::new(scene, prepared.method, prepared.params, prepared.event);
@@ -126,7 +151,7 @@ pub fn gif_of_run(prepared: &PreparedRun, path: &Path, frames: u32) -> anyhow::R
             done += 1;
         }
         draw_state(&area, scene, &particles, fast)?;
-        area.present().map_err(|e| anyhow!("{e}"))?;
+        area.present().map_err(|e| picture_error(path, e))?;
     }
     Ok(())
 }

@@ -3,8 +3,11 @@
 //! configurations so that drift of the machine hits all of them alike. Each finished
 //! repetition is written at once (the whole file, atomically), so a crash, a kill or
 //! Ctrl-C loses nothing already measured, and `--resume` runs only what is missing.
+//! One study at a time writes into a study folder (a lock a second run waits for), each
+//! into a results file of its own, and each start removes what a killed one left unfinished.
 
 use std::collections::BTreeSet;
+use std::fs::{File, TryLockError};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -15,8 +18,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::cli::BackendName;
 use crate::environment::Environment;
 use crate::manifest::{Configuration, SceneInput, Study};
-use crate::output::write_atomically;
-use crate::process::{Ended, run_with_timeout, tail};
+use crate::output::{remove_leftovers, write_atomically};
+use crate::process::{Ended, interrupt_note, run_with_timeout, tail};
 use crate::records::{self, Record, RecordContext, STATUS_FAILED, STATUS_OK, STATUS_TIMED_OUT};
 use crate::summary::RunSummary;
 
@@ -70,6 +73,15 @@ pub fn run_study(
             dir.display()
         )
     })?;
+    let _held = hold_folder(&dir)?;
+    // No other study writes here now: anything unfinished is a killed run's.
+    let removed = remove_leftovers(&dir)? + remove_leftovers(&dir.join("scenes"))?;
+    if removed > 0 {
+        note(&format!(
+            "note: removed {removed} unfinished file(s) a stopped study left in {}",
+            dir.display()
+        ));
+    }
     let manifest_hash = manifest_hash(manifest_text);
     let build_id = format!(
         "{}{}-{}-[{}]",
@@ -88,6 +100,18 @@ pub fn run_study(
         },
         false => (new_results_path(&dir, &environment), Vec::new()),
     };
+    let continue_with = resume_command(&study.manifest, &options.out);
+    let kept_note = |rows: &[Record]| {
+        let ok = rows.iter().filter(|r| r.status == STATUS_OK).count();
+        (ok > 0).then(|| {
+            format!(
+                "interrupted: {ok} run{} kept in {}; continue with {continue_with}",
+                if ok == 1 { "" } else { "s" },
+                results.display()
+            )
+        })
+    };
+    *interrupt_note() = kept_note(&rows);
     let kept = rows.len();
     let done: BTreeSet<(String, u32)> = rows
         .iter()
@@ -107,6 +131,11 @@ pub fn run_study(
                 configuration.workers,
                 environment.logical_cores
             ));
+        }
+    }
+    for configuration in &configurations {
+        if let Some(placement) = crate::limits::placement_note(&configuration.footprint) {
+            note(&format!("{placement} ({}, every run)", configuration.key()));
         }
     }
     let scene_files = materialize_scenes(&dir, &configurations)?;
@@ -226,7 +255,10 @@ pub fn run_study(
             progress.suspend(|| eprintln!("run failed: {key}: {}", record.error));
         }
         rows.push(record);
+        let mut interrupted = interrupt_note();
         records::write(&results, &rows)?;
+        *interrupted = kept_note(&rows);
+        drop(interrupted);
         progress.inc(1);
     }
     progress.finish_and_clear();
@@ -235,6 +267,7 @@ pub fn run_study(
         for row in rows.iter_mut().skip(kept_ok) {
             row.load_average_end = end;
         }
+        let _writing = interrupt_note();
         records::write(&results, &rows)?;
     }
     Ok(StudyOutcome {
@@ -297,7 +330,57 @@ pub fn manifest_hash(manifest_text: &str) -> String {
     )
 }
 
-/// `<dir>/<UTC timestamp>-<host>-<commit>.parquet`.
+/// Holds the study folder `dir` for this process until the file returned is dropped (or
+/// the process ends, however it ends): a second study into the same folder waits, so
+/// studies never share the machine's cores nor a results file.
+fn hold_folder(dir: &Path) -> anyhow::Result<File> {
+    let folder = File::open(dir)
+        .with_context(|| format!("cannot open the results folder {}", dir.display()))?;
+    match folder.try_lock() {
+        Ok(()) => {}
+        Err(TryLockError::WouldBlock) => {
+            eprintln!(
+                "waiting: another collide run is writing into {}; this study starts when it ends (Ctrl-C stops waiting)",
+                dir.display()
+            );
+            folder
+                .lock()
+                .with_context(|| format!("cannot lock the results folder {}", dir.display()))?;
+        }
+        // Some network file systems cannot lock: results files stay apart by name.
+        Err(TryLockError::Error(err)) => eprintln!(
+            "warning: cannot lock the results folder {} ({}); do not run two studies into it at once",
+            dir.display(),
+            crate::output::io_reason(&err)
+        ),
+    }
+    Ok(folder)
+}
+
+/// The command that continues a study: `collide run MANIFEST [--out OUT] --resume`.
+fn resume_command(manifest: &Path, out: &Path) -> String {
+    let word = |path: &Path| {
+        let text = path.display().to_string();
+        if text
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "-_./".contains(c))
+        {
+            text
+        } else {
+            format!("'{}'", text.replace('\'', r"'\''"))
+        }
+    };
+    let out = if out == Path::new("results") {
+        String::new()
+    } else {
+        format!(" --out {}", word(out))
+    };
+    format!("collide run {}{out} --resume", word(manifest))
+}
+
+/// `<dir>/<UTC timestamp>-<host>-<commit>.parquet`, or with `-2`, `-3`, ... before
+/// `.parquet` when a study started in the same second already took that name (the
+/// caller holds the folder, so no other study is choosing at the same time).
 fn new_results_path(dir: &Path, environment: &Environment) -> PathBuf {
     let stamp: String = records::utc_now()
         .chars()
@@ -314,16 +397,27 @@ fn new_results_path(dir: &Path, environment: &Environment) -> PathBuf {
             }
         })
         .collect();
-    dir.join(format!("{stamp}-{host}-{}.parquet", environment.git_commit))
+    let base = format!("{stamp}-{host}-{}", environment.git_commit);
+    (1..)
+        .map(|count| match count {
+            1 => dir.join(format!("{base}.parquet")),
+            _ => dir.join(format!("{base}-{count}.parquet")),
+        })
+        .find(|path| !path.exists())
+        .expect("a free name among unboundedly many")
 }
 
-/// The newest results file in `dir` written by the same manifest and build, with its rows.
+/// The results file in `dir` last written by the same manifest and build, with its rows.
 fn resumable(
     dir: &Path,
     manifest_hash: &str,
     build_id: &str,
 ) -> anyhow::Result<Option<(PathBuf, Vec<Record>)>> {
-    for path in records::files_in(dir)?.into_iter().rev() {
+    let mut files = records::files_in(dir)?;
+    // Last written first; names (oldest first) break ties, e.g. two studies in one second.
+    let modified = |path: &PathBuf| std::fs::metadata(path).and_then(|m| m.modified()).ok();
+    files.sort_by(|a, b| modified(b).cmp(&modified(a)).then_with(|| b.cmp(a)));
+    for path in files {
         let rows = records::read(&path)?;
         if rows
             .first()

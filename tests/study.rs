@@ -408,29 +408,30 @@ fn processes_mentioning(needle: &str) -> Vec<String> {
         .collect()
 }
 
-#[test]
-fn ctrl_c_stops_the_running_child_and_keeps_what_was_measured() {
+/// Starts `collide run MANIFEST --quiet --out OUT` in its own process group, waits until
+/// it has written one more results file into `OUT/STUDY`, then sends `signal` to the
+/// group as a terminal's Ctrl-C would (reaching it and not this test). Its output.
+pub fn interrupt_after_first_row(
+    manifest: &str,
+    out: &Path,
+    study: &str,
+    signal: rustix::process::Signal,
+) -> std::process::Output {
     use std::os::unix::process::CommandExt;
 
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("results");
-    // A 20-step run, then one of ten million steps (about a minute) to interrupt.
-    let path = manifest(
-        dir.path(),
-        "repetitions = 1\nwarmups = 0\n[sweep]\nsteps = [20, 10000000]\n[backends]\nserial = true\n",
-    );
-    let mut study = std::process::Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args(["run", &path, "--quiet", "--no-report", "--out"])
-        .arg(&out)
+    let folder = out.join(study);
+    let count = || records::files_in(&folder).map_or(0, |files| files.len());
+    let before = count();
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_collide"))
+        .args(["run", manifest, "--quiet", "--no-report", "--out", out.to_str().unwrap()])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        // Its own group: the "terminal" Ctrl-C below reaches it and not this test.
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
         .process_group(0)
         .spawn()
         .unwrap();
     let started = Instant::now();
-    while records::files_in(&out.join("tiny")).map_or(true, |f| f.is_empty()) {
+    while count() == before {
         assert!(
             started.elapsed() < Duration::from_secs(20),
             "no results file appeared"
@@ -438,10 +439,22 @@ fn ctrl_c_stops_the_running_child_and_keeps_what_was_measured() {
         std::thread::sleep(Duration::from_millis(20));
     }
     std::thread::sleep(Duration::from_millis(300));
-    let group = rustix::process::Pid::from_raw(study.id() as i32).unwrap();
-    rustix::process::kill_process_group(group, rustix::process::Signal::INT).unwrap();
-    let status = study.wait().unwrap();
-    assert_eq!(status.code(), Some(130));
+    let group = rustix::process::Pid::from_raw(child.id() as i32).unwrap();
+    rustix::process::kill_process_group(group, signal).unwrap();
+    child.wait_with_output().unwrap()
+}
+
+#[test]
+fn ctrl_c_stops_the_running_child_and_keeps_what_was_measured() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    // A 20-step run, then one of ten million steps (about a minute) to interrupt.
+    let path = manifest(
+        dir.path(),
+        "repetitions = 1\nwarmups = 0\n[sweep]\nsteps = [20, 10000000]\n[backends]\nserial = true\n",
+    );
+    let ended = interrupt_after_first_row(&path, &out, "tiny", rustix::process::Signal::INT);
+    assert_eq!(ended.status.code(), Some(130));
     let rows = records::read(&records::files_in(&out.join("tiny")).unwrap()[0]).unwrap();
     assert_eq!(rows.len(), 1, "the finished run is kept");
     assert_eq!(rows[0].steps, 20);

@@ -8,6 +8,7 @@ mod cli;
 #[cfg(feature = "mpi")]
 mod mpi;
 mod physics;
+mod reliability;
 mod report;
 mod resting;
 mod schema;
