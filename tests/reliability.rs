@@ -341,7 +341,14 @@ fn worker_counts_above_the_ceiling_are_refused_unless_insisted_on() {
 
 fn spawn_study(manifest: &str, out: &Path) -> std::process::Child {
     Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args(["run", manifest, "--quiet", "--out", out.to_str().unwrap()])
+        .args([
+            "run",
+            manifest,
+            "--quiet",
+            "--no-report",
+            "--out",
+            out.to_str().unwrap(),
+        ])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -368,7 +375,14 @@ fn studies_started_together_into_one_folder_both_keep_all_their_rows() {
             "{}",
             String::from_utf8_lossy(&done.stderr)
         );
-        said.push(stdout.trim().rsplit("→ ").next().unwrap().to_owned());
+        let named = stdout.lines().find_map(|line| line.split_once("→ "));
+        said.push(
+            named
+                .expect("the study names its results file")
+                .1
+                .trim()
+                .to_owned(),
+        );
     }
     assert_ne!(said[0], said[1], "both studies named the same file");
     let files = records::files_in(&out.join("tiny")).unwrap();
@@ -380,7 +394,14 @@ fn studies_started_together_into_one_folder_both_keep_all_their_rows() {
         assert!(said.contains(&file.display().to_string()), "{said:?}");
     }
     // Resuming continues the file written last, which has nothing left to run.
-    let resumed = collide(&["run", manifest, "--out", out.to_str().unwrap(), "--resume"]);
+    let resumed = collide(&[
+        "run",
+        manifest,
+        "--no-report",
+        "--out",
+        out.to_str().unwrap(),
+        "--resume",
+    ]);
     let stdout = String::from_utf8(resumed.stdout).unwrap();
     assert!(
         resumed.status.success() && stdout.contains("0 runs measured") && stdout.contains("4 kept"),
@@ -436,6 +457,7 @@ fn unfinished_files_of_a_killed_study_are_never_results_and_are_removed_next_tim
                 &[
                     "run",
                     manifest.to_str().unwrap(),
+                    "--no-report",
                     "--out",
                     out.to_str().unwrap(),
                 ],

@@ -423,7 +423,14 @@ pub fn interrupt_after_first_row(
     let count = || records::files_in(&folder).map_or(0, |files| files.len());
     let before = count();
     let child = std::process::Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args(["run", manifest, "--quiet", "--no-report", "--out", out.to_str().unwrap()])
+        .args([
+            "run",
+            manifest,
+            "--quiet",
+            "--no-report",
+            "--out",
+            out.to_str().unwrap(),
+        ])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
