@@ -63,6 +63,23 @@ fn rayon_at_1_2_3_4_and_8_threads_gives_the_serial_hash() {
     }
 }
 
+/// Steps of over half a radius for the rms disk: disks escape the neighbour lists
+/// between rebuilds, and their pairs come from queries that any band's disks may be in.
+#[test]
+fn rayon_with_coarse_steps_gives_the_serial_hash() {
+    for (name, mut spec) in scenes() {
+        spec.method = MethodSpec::stepped(0.6, 200, Broadphase::Grid);
+        let reference = serial::run(&spec).unwrap().summary;
+        for n in [1, 2, 3] {
+            let summary = threads::run(&spec, threads(n)).unwrap().summary;
+            assert_eq!(
+                summary.state_hash, reference.state_hash,
+                "{name}, {n} threads"
+            );
+        }
+    }
+}
+
 #[test]
 fn rayon_all_pairs_and_gravity_give_the_serial_hash() {
     let mut gas = GasSpec {

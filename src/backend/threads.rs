@@ -108,6 +108,8 @@ pub struct ThreadedStepper {
     /// Per strip: whether it was the first strip of a band at the last build (with more
     /// than one band). Only a disk there can be in two bands' lists.
     first_of_band: Vec<bool>,
+    /// Per disk: in a pair an escapee's query found this step (all false between steps).
+    touched: Vec<bool>,
     builds_since_reorder: u32,
     /// Per band: disks that left its strips in the last refresh.
     movers: Vec<Vec<Entry>>,
@@ -141,6 +143,7 @@ impl ThreadedStepper {
             skin,
             lists: Vec::new(),
             first_of_band: Vec::new(),
+            touched: Vec::new(),
             builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
             movers: Vec::new(),
             contacts: Vec::new(),
@@ -203,9 +206,7 @@ impl ThreadedStepper {
         self.crossing.clear();
         match self.params.broadphase {
             Broadphase::Grid => {
-                if self.lists_are_stale(particles) {
-                    self.rebuild_lists(particles);
-                }
+                let escaped = self.contacts_of_escapees(particles);
                 let n_lists = self.lists.len();
                 self.contacts.resize_with(n_lists, Vec::new);
                 self.handed_over.resize_with(n_lists, Vec::new);
@@ -213,11 +214,13 @@ impl ThreadedStepper {
                     .resize_with(n_lists, ContactSchedule::default);
                 // A disk in a band's first strip at the build may also be in the list of
                 // the band below (its north strip), or of the last band (periodic wrap).
+                // So may a disk in a contact found by an escapee's query.
                 let layout = *self.grid.layout();
                 let (first_of_band, skin) = (&self.first_of_band, &self.skin);
+                let touched = &self.touched;
                 let pinned = |disk: u32| {
                     let (_, y_built) = skin.built_position(disk as usize);
-                    first_of_band[layout.strip_of(y_built)]
+                    first_of_band[layout.strip_of(y_built)] || touched[disk as usize]
                 };
                 let (domain, particles) = (&self.domain, &*particles);
                 self.lists
@@ -234,29 +237,75 @@ impl ThreadedStepper {
                         contacts.sort_unstable_by_key(|contact| contact.key);
                     });
                 self.crossing.extend(self.handed_over.iter().flatten());
+                self.crossing.extend_from_slice(&escaped);
                 self.crossing.sort_unstable_by_key(|contact| contact.key);
+                // An escapee's pair may also be listed: keep it once.
+                self.crossing.dedup_by_key(|contact| contact.key);
+                for contact in &escaped {
+                    self.touched[contact.a as usize] = false;
+                    self.touched[contact.b as usize] = false;
+                }
             }
             Broadphase::AllPairs => self.find_all_pairs(particles),
         }
     }
 
-    /// True when a disk moved half the skin since the lists were built (the largest
-    /// displacement found in parallel chunks), or they were never built.
-    fn lists_are_stale(&self, particles: &Particles) -> bool {
-        if !self.skin.is_built_for(particles) {
-            return true;
-        }
+    /// Rebuilds the lists when they are stale, as the serial stepper does, or else finds
+    /// the pairs of the disks that escaped them (in parallel chunks) and marks both disks
+    /// of each in `touched`: their chains go to the crossing list. Returns those pairs.
+    fn contacts_of_escapees(&mut self, particles: &mut Particles) -> Vec<Contact> {
         let n = particles.len();
+        self.touched.resize(n, false);
         let chunk = n.div_ceil(4 * self.n_bands).max(MIN_CHUNK);
-        let (skin, domain) = (&self.skin, &self.domain);
-        let largest = (0..n.div_ceil(chunk))
-            .into_par_iter()
-            .map(|k| {
-                skin.largest_displacement_sq(k * chunk..n.min((k + 1) * chunk), particles, domain)
+        let chunks = || (0..n.div_ceil(chunk)).map(move |k| k * chunk..n.min((k + 1) * chunk));
+        let (skin, domain, now) = (&self.skin, &self.domain, &*particles);
+        let largest_sq = if skin.is_built_for(particles) {
+            chunks()
+                .collect::<Vec<_>>()
+                .into_par_iter()
+                .map(|range| skin.largest_displacement_sq(range, now, domain))
+                // NaN (a disk gone astray) wins, so that it counts as stale.
+                .reduce(|| 0.0, |a, b| if a >= b || a.is_nan() { a } else { b })
+        } else {
+            f64::INFINITY
+        };
+        if !skin.is_exceeded(largest_sq) {
+            return Vec::new();
+        }
+        let escapees: Vec<u32> = if largest_sq <= skin.width() * skin.width() {
+            let found: Vec<Vec<u32>> = chunks()
+                .collect::<Vec<_>>()
+                .into_par_iter()
+                .map(|range| {
+                    let mut escapees = Vec::new();
+                    skin.escapees(range, now, domain, &mut escapees);
+                    escapees
+                })
+                .collect();
+            found.concat()
+        } else {
+            Vec::new()
+        };
+        if escapees.is_empty() || !skin.may_patch(escapees.len(), n, largest_sq) {
+            self.rebuild_lists(particles);
+            return Vec::new();
+        }
+        let grid = &self.grid;
+        let moved = largest_sq.sqrt();
+        let found: Vec<Vec<Contact>> = escapees
+            .par_chunks(256)
+            .map(|movers| {
+                let mut contacts = Vec::new();
+                grid.find_contacts_of(movers, moved, now, domain, &mut contacts);
+                contacts
             })
-            // NaN (a disk gone astray) wins, so that it counts as stale.
-            .reduce(|| 0.0, |a, b| if a >= b || a.is_nan() { a } else { b });
-        self.skin.is_exceeded(largest)
+            .collect();
+        let escaped = found.concat();
+        for contact in &escaped {
+            self.touched[contact.a as usize] = true;
+            self.touched[contact.b as usize] = true;
+        }
+        escaped
     }
 
     /// Rebuilds the grid and, band by band in parallel, the neighbour lists, and records
@@ -360,6 +409,7 @@ impl ThreadedStepper {
         let (domain, physics, dt) = (&self.domain, &self.physics, self.params.dt);
         let n_lists = self.contacts.len();
         if n_lists == 1 {
+            // One list and the crossing chains (of escapees) share no disk: either order.
             resolve_contacts(
                 particles,
                 domain,
@@ -398,16 +448,16 @@ impl ThreadedStepper {
                     a
                 });
             self.counters.merge(&band_counters);
-            resolve_contacts(
-                particles,
-                domain,
-                physics,
-                dt,
-                &self.crossing,
-                &mut self.counters,
-                |_| {},
-            );
         }
+        resolve_contacts(
+            particles,
+            domain,
+            physics,
+            dt,
+            &self.crossing,
+            &mut self.counters,
+            |_| {},
+        );
     }
 }
 

@@ -156,14 +156,19 @@ impl Skin {
         largest.into_iter().fold(0.0, larger)
     }
 
-    /// Appends the storage indices of the disks that moved half the skin since the
-    /// last build: the lists may miss their pairs, and only theirs.
-    pub fn escapees(&self, particles: &Particles, domain: &Domain, escapees: &mut Vec<u32>) {
+    /// Appends the storage indices, in order, of the disks stored in `range` that moved
+    /// half the skin since the last build: the lists may miss their pairs, and only theirs.
+    pub fn escapees(
+        &self,
+        range: Range<usize>,
+        particles: &Particles,
+        domain: &Domain,
+        escapees: &mut Vec<u32>,
+    ) {
         let half = 0.5 * SAFE_SKIN_FRACTION * self.width;
-        let positions = particles.x.iter().zip(&particles.y);
-        let built = self.x_built.iter().zip(&self.y_built);
-        for (idx, ((&x, &y), (&x0, &y0))) in positions.zip(built).enumerate() {
-            let (dx, dy) = domain.separation(x0, y0, x, y);
+        for idx in range {
+            let (x0, y0) = (self.x_built[idx], self.y_built[idx]);
+            let (dx, dy) = domain.separation(x0, y0, particles.x[idx], particles.y[idx]);
             let moved_sq = dx * dx + dy * dy;
             if moved_sq.is_nan() || moved_sq >= half * half {
                 escapees.push(idx as u32);

@@ -169,7 +169,9 @@ impl Stepper {
         self.escapees.clear();
         if self.skin.is_exceeded(largest_sq) {
             if largest_sq <= self.skin.width() * self.skin.width() {
-                self.skin.escapees(particles, domain, &mut self.escapees);
+                let all = 0..particles.len();
+                self.skin
+                    .escapees(all, particles, domain, &mut self.escapees);
             }
             if !self
                 .skin
