@@ -33,7 +33,7 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Simulate(args) => simulate(&args),
         Command::Run(args) => run_study(&args),
         Command::Results(args) => {
-            print!("{}", results::table(&results::load(&args.path)?));
+            print!("{}", results::show(&args.path)?);
             Ok(())
         }
         Command::Report(args) => write_report(&args),
@@ -104,7 +104,7 @@ const SCENE_PICTURE: &str = "scene.png";
 
 fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
     let records = results::load(&args.path)?;
-    let study = records.first().map_or("study", |r| r.study.as_str());
+    let study = results::one_study(&records, &args.path)?;
     let out = args
         .out
         .clone()

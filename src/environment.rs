@@ -1,5 +1,6 @@
-//! The machine and build a study ran on, captured once per study (Linux `/proc` and a
-//! few commands; anything unavailable is recorded as "unknown").
+//! The machine and build a study ran on, captured once per study (Linux `/proc`, a
+//! command or two, and what `build.rs` recorded of the build; anything unavailable is
+//! recorded as "unknown").
 
 use std::process::Command;
 
@@ -20,7 +21,8 @@ pub struct Environment {
     pub profile: String,
     /// Cargo features compiled in, comma-separated ("" for none).
     pub features: String,
-    /// The working tree's commit and state when the study ran (`git` in the current folder).
+    /// The commit this collide was built from ("unknown" outside a git checkout), and
+    /// whether its tracked files had uncommitted changes then (see `build.rs`).
     pub git_commit: String,
     pub git_dirty: bool,
     /// The MPI library's first `mpirun --version` line; "none" without the mpi feature.
@@ -43,11 +45,6 @@ impl Environment {
             .into_iter()
             .filter_map(|(name, on)| on.then_some(name))
             .collect();
-        let git_commit = command_line("git", &["rev-parse", "--short=12", "HEAD"]);
-        let git_dirty = Command::new("git")
-            .args(["status", "--porcelain", "--untracked-files=no"])
-            .output()
-            .is_ok_and(|out| out.status.success() && !out.stdout.is_empty());
         Environment {
             hostname: first_line(&read("/proc/sys/kernel/hostname")),
             cpu_model,
@@ -63,8 +60,8 @@ impl Environment {
             }
             .to_owned(),
             features: features.join(","),
-            git_commit,
-            git_dirty,
+            git_commit: env!("COLLIDE_GIT_COMMIT").to_owned(),
+            git_dirty: env!("COLLIDE_GIT_DIRTY") == "true",
             mpi_library: if cfg!(feature = "mpi") {
                 command_line("mpirun", &["--version"])
             } else {

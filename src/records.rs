@@ -451,12 +451,13 @@ pub fn to_frame(records: &[Record]) -> PolarsResult<DataFrame> {
 /// Rebuilds records from a table written by [`to_frame`]; names the first missing or
 /// mistyped column otherwise.
 pub fn from_frame(frame: &DataFrame) -> anyhow::Result<Vec<Record>> {
-    let version = frame
+    let versions = frame
         .column("schema_version")
         .context("no `schema_version` column: not a collide results file")?
         .u32()
-        .context("`schema_version` is not an unsigned integer: not a collide results file")?
-        .get(0);
+        .context("`schema_version` is not an unsigned integer: not a collide results file")?;
+    // A table without rows has no version to read (polars' `get(0)` and `first()` panic).
+    let version = versions.iter().next().flatten();
     let upgraded;
     let frame = match version {
         Some(version) if version > SCHEMA_VERSION => bail!(
@@ -482,12 +483,12 @@ pub fn from_frame(frame: &DataFrame) -> anyhow::Result<Vec<Record>> {
     macro_rules! read {
         (str: $($s:ident),*; u64: $($u:ident),*; u32: $($r:ident),*; f64: $($f:ident),*;
          bool: $($b:ident),*; opt_u64: $($o:ident),*) => {{
-            $(let $s = column(stringify!($s))?.str()?;)*
-            $(let $u = column(stringify!($u))?.u64()?;)*
-            $(let $r = column(stringify!($r))?.u32()?;)*
-            $(let $f = column(stringify!($f))?.f64()?;)*
-            $(let $b = column(stringify!($b))?.bool()?;)*
-            $(let $o = column(stringify!($o))?.u64()?;)*
+            $(let $s = column(stringify!($s))?.str().with_context(|| mistyped(stringify!($s), "text"))?;)*
+            $(let $u = column(stringify!($u))?.u64().with_context(|| mistyped(stringify!($u), "a count (u64)"))?;)*
+            $(let $r = column(stringify!($r))?.u32().with_context(|| mistyped(stringify!($r), "a count (u32)"))?;)*
+            $(let $f = column(stringify!($f))?.f64().with_context(|| mistyped(stringify!($f), "a number (f64)"))?;)*
+            $(let $b = column(stringify!($b))?.bool().with_context(|| mistyped(stringify!($b), "true/false"))?;)*
+            $(let $o = column(stringify!($o))?.u64().with_context(|| mistyped(stringify!($o), "a count (u64)"))?;)*
             (0..rows)
                 .map(|i| Record {
                     $($s: $s.get(i).unwrap_or_default().to_owned(),)*
@@ -501,6 +502,13 @@ pub fn from_frame(frame: &DataFrame) -> anyhow::Result<Vec<Record>> {
         }};
     }
     Ok(for_each_column!(read))
+}
+
+/// The message for a column of the wrong type.
+fn mistyped(name: &str, expected: &str) -> String {
+    format!(
+        "column `{name}` does not hold {expected}: not a collide results file, or a damaged one"
+    )
 }
 
 /// A table of an older schema version with the columns added since then, each filled
@@ -544,12 +552,27 @@ pub fn files_in(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-/// Reads the records of one results file, saying which file and why if it cannot.
+/// Reads the records of one results file, saying which file and why if it cannot. A
+/// file without rows (a study stopped before its first run ended) reads as no records.
 pub fn read(path: &Path) -> anyhow::Result<Vec<Record>> {
     let file = File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
-    let frame = ParquetReader::new(file)
-        .finish()
-        .with_context(|| format!("{} is not a readable Parquet file", path.display()))?;
+    let bytes = file
+        .metadata()
+        .with_context(|| format!("cannot read {}", path.display()))?
+        .len();
+    if bytes == 0 {
+        bail!(
+            "{} is empty (0 bytes), not a results file; delete it (a study that was \
+             stopped while writing may leave one)",
+            path.display()
+        );
+    }
+    let frame = ParquetReader::new(file).finish().with_context(|| {
+        format!(
+            "{} is not a readable Parquet file (truncated, damaged, or another format)",
+            path.display()
+        )
+    })?;
     from_frame(&frame).with_context(|| format!("{}", path.display()))
 }
 

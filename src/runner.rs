@@ -296,14 +296,21 @@ fn new_results_path(dir: &Path, environment: &Environment) -> PathBuf {
     dir.join(format!("{stamp}-{host}-{}.parquet", environment.git_commit))
 }
 
-/// The newest results file in `dir` written by the same manifest and build, with its rows.
+/// The newest results file in `dir` written by the same manifest and build, with its rows;
+/// files that cannot be read are passed over with a warning naming them.
 fn resumable(
     dir: &Path,
     manifest_hash: &str,
     build_id: &str,
 ) -> anyhow::Result<Option<(PathBuf, Vec<Record>)>> {
     for path in records::files_in(dir)?.into_iter().rev() {
-        let rows = records::read(&path)?;
+        let rows = match records::read(&path) {
+            Ok(rows) => rows,
+            Err(err) => {
+                eprintln!("warning: not resuming from {}: {err:#}", path.display());
+                continue;
+            }
+        };
         if rows
             .first()
             .is_some_and(|r| r.manifest_hash == manifest_hash && r.build_id == build_id)

@@ -5,6 +5,7 @@ mod auto;
 mod backends;
 mod check;
 mod cli;
+mod faults;
 #[cfg(feature = "mpi")]
 mod mpi;
 mod physics;
