@@ -9,6 +9,7 @@ use crate::check::{CheckOptions, CheckOutcome};
 use crate::cli::{
     BackendName, CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs,
 };
+use crate::exit::RunsFailed;
 use crate::output::{write_atomically, write_state_csv};
 use crate::runner::{Calibration, RunOptions};
 use crate::scene_file;
@@ -24,7 +25,7 @@ use crate::{
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Outcome {
     Done,
-    /// `collide check` found a regression (exit code 1).
+    /// `collide check` found a regression ([`crate::exit::RUNS_FAILED`]).
     Regressed,
 }
 
@@ -193,11 +194,12 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
         outcome.results.display()
     );
     if outcome.failed > 0 {
-        bail!(
+        return Err(RunsFailed(format!(
             "{} run(s) failed; their rows in {} say why (status, error)",
             outcome.failed,
             outcome.results.display()
-        );
+        ))
+        .into());
     }
     Ok(())
 }

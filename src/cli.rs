@@ -13,7 +13,8 @@ use crate::spec::{MethodChoice, Observe};
 #[command(
     name = "collide",
     version,
-    about = "2D hard-disk collision simulator and scaling-study harness"
+    about = "2D hard-disk collision simulator and scaling-study harness",
+    after_help = crate::exit::help()
 )]
 pub struct Cli {
     #[command(subcommand)]
@@ -33,7 +34,7 @@ pub enum Command {
     /// Draw a scene: a PNG of its disks after the run, and/or a GIF of the run.
     Render(RenderArgs),
     /// CI timing check: run a small manifest and compare it with a recorded baseline
-    /// (exit 0: nothing regressed, 1: a regression, 2: an error).
+    /// (exit 0: nothing regressed, 1: a regression or failed runs, 2: an error).
     Check(CheckArgs),
     /// Time the fixed calibration workload that `collide check` normalises by.
     #[command(hide = true)]

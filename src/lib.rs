@@ -13,6 +13,7 @@ pub mod calibrate;
 pub mod check;
 pub mod cli;
 pub mod environment;
+pub mod exit;
 pub mod figures;
 pub mod manifest;
 pub mod output;

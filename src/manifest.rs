@@ -471,6 +471,13 @@ fn sweep_points(sweep: &RawSweep) -> Result<Vec<Overrides>, (usize, String)> {
 }
 
 fn scene_input(raw: &RawScene, folder: &Path) -> Result<(String, SceneInput), String> {
+    if raw.name.as_ref().is_some_and(|name| name.trim().is_empty()) {
+        return Err(
+            "a scene's `name` is blank; give it letters, digits, - or _ (it names the \
+                    scene in the results and its file under scenes/), or drop it to use the file's"
+                .into(),
+        );
+    }
     match (&raw.file, &raw.scene) {
         (Some(file), None) => {
             if raw.method.is_some() {

@@ -32,7 +32,8 @@ const GRACE: Duration = Duration::from_secs(2);
 static RUNNING: Mutex<BTreeSet<i32>> = Mutex::new(BTreeSet::new());
 
 /// On Ctrl-C or SIGTERM, interrupts every running child's group (a child that launched
-/// MPI ranks stops them in turn), then exits with code 130. Call once, early.
+/// MPI ranks stops them in turn), then exits with code 130 ([`crate::exit::INTERRUPTED`]).
+/// Call once, early.
 pub fn stop_children_on_interrupt() {
     let installed = ctrlc::set_handler(|| {
         let groups: Vec<i32> = RUNNING
@@ -41,7 +42,7 @@ pub fn stop_children_on_interrupt() {
         for group in groups {
             signal_group(group, Signal::INT);
         }
-        std::process::exit(130);
+        std::process::exit(i32::from(crate::exit::INTERRUPTED.code));
     });
     // A second call in the same process fails; the first handler stays, which is right.
     let _ = installed;

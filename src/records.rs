@@ -531,13 +531,14 @@ fn upgrade(frame: &DataFrame, version: u32) -> anyhow::Result<DataFrame> {
 /// Writes the records to `path` atomically (Parquet, zstd).
 pub fn write(path: &Path, records: &[Record]) -> anyhow::Result<()> {
     let mut frame = to_frame(records)?;
-    write_atomically(path, |out| {
-        ParquetWriter::new(out)
-            .with_compression(ParquetCompression::Zstd(None))
-            .finish(&mut frame)
-            .map(|_| ())
-            .map_err(std::io::Error::other)
-    })
+    // Encoded in memory first (result tables are small), so that a failing disk's own
+    // error reaches the message rather than the encoder's "transport error".
+    let mut bytes = Vec::new();
+    ParquetWriter::new(&mut bytes)
+        .with_compression(ParquetCompression::Zstd(None))
+        .finish(&mut frame)
+        .context("cannot encode the records as Parquet")?;
+    write_atomically(path, |out| out.write_all(&bytes))
 }
 
 /// The `.parquet` files in `dir`, sorted by name (oldest first: names start with the

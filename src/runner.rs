@@ -8,6 +8,7 @@ use std::collections::BTreeSet;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::time::Duration;
 
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -203,34 +204,7 @@ pub fn run_study(
             environment: &environment,
             study_started_utc: &started_utc,
         };
-        let record = match run(configuration, &scene_files[c]) {
-            Err(e) => Record::failed(
-                &context,
-                STATUS_FAILED,
-                format!("cannot start collide: {e}"),
-            ),
-            Ok(Ended::TimedOut { stderr }) => Record::failed(
-                &context,
-                STATUS_TIMED_OUT,
-                format!(
-                    "killed after {} s{}",
-                    study.timeout.as_secs_f64(),
-                    tail("its output", &stderr)
-                ),
-            ),
-            Ok(Ended::Exited {
-                status,
-                stdout,
-                stderr,
-            }) => match RunSummary::from_last_line(&stdout) {
-                Ok(summary) if status.success() => Record::measured(&context, &summary),
-                _ => Record::failed(
-                    &context,
-                    STATUS_FAILED,
-                    format!("{status}{}", tail("its output", &stderr)),
-                ),
-            },
-        };
+        let record = record_of(&context, run(configuration, &scene_files[c]), study.timeout);
         if record.status == STATUS_OK {
             measured += 1;
         } else {
@@ -256,6 +230,48 @@ pub fn run_study(
         kept,
         calibrations,
     })
+}
+
+/// The row of one run from how its process ended: measured if it exited 0 with a
+/// summary on its last line; failed otherwise, keeping why and the end of its output.
+fn record_of(
+    context: &RecordContext<'_>,
+    ended: std::io::Result<Ended>,
+    timeout: Duration,
+) -> Record {
+    match ended {
+        Err(e) => Record::failed(context, STATUS_FAILED, format!("cannot start collide: {e}")),
+        Ok(Ended::TimedOut { stderr }) => Record::failed(
+            context,
+            STATUS_TIMED_OUT,
+            format!(
+                "killed after {} s{}",
+                timeout.as_secs_f64(),
+                tail("its output", &stderr)
+            ),
+        ),
+        Ok(Ended::Exited {
+            status,
+            stdout,
+            stderr,
+        }) => match (status.success(), RunSummary::from_last_line(&stdout)) {
+            (true, Ok(summary)) => Record::measured(context, &summary),
+            (true, Err(e)) => Record::failed(
+                context,
+                STATUS_FAILED,
+                format!(
+                    "it exited 0 but printed no summary on its last line ({e}){}{}",
+                    tail("its output", &stdout),
+                    tail("its error output", &stderr)
+                ),
+            ),
+            (false, _) => Record::failed(
+                context,
+                STATUS_FAILED,
+                format!("{status}{}", tail("its output", &stderr)),
+            ),
+        },
+    }
 }
 
 /// What `collide calibrate` prints: one JSON object, the times of
@@ -341,4 +357,47 @@ pub fn materialize_scenes(
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::ExitStatus;
+
+    use super::*;
+
+    #[test]
+    fn a_run_that_exits_0_without_a_summary_keeps_the_reason_and_what_it_printed() {
+        let environment = Environment::capture();
+        let context = RecordContext {
+            study: "s",
+            manifest_hash: "m",
+            build_id: "b",
+            config_key: "k",
+            scene: "gas",
+            scaling: "strong",
+            backend: "serial",
+            workers: 1,
+            repetition: 0,
+            environment: &environment,
+            study_started_utc: "2026-11-23T00:00:00Z",
+        };
+        let ended = |code: i32, stdout: &str| Ended::Exited {
+            status: ExitStatus::from_raw(code << 8),
+            stdout: stdout.to_owned(),
+            stderr: "a warning\n".to_owned(),
+        };
+        let timeout = Duration::from_secs(1);
+        let quiet = record_of(&context, Ok(ended(0, "step 10\nall done\n")), timeout);
+        assert_eq!(quiet.status, STATUS_FAILED);
+        for fragment in ["exited 0", "no summary", "all done", "a warning"] {
+            assert!(
+                quiet.error.contains(fragment),
+                "{fragment}: {}",
+                quiet.error
+            );
+        }
+        let failed = record_of(&context, Ok(ended(3, "")), timeout);
+        assert!(failed.error.contains("exit status: 3") && failed.error.contains("a warning"));
+    }
 }

@@ -191,7 +191,12 @@ fn resume_passes_over_damaged_files_and_check_refuses_a_damaged_baseline() {
     let info = std::fs::read_to_string(repo.join("results/baseline/baseline.json")).unwrap();
     let mut info: serde_json::Value = serde_json::from_str(&info).unwrap();
     info["environment"]["features"] = if cfg!(feature = "mpi") { "mpi" } else { "" }.into();
-    info["environment"]["profile"] = if cfg!(debug_assertions) { "debug" } else { "release" }.into();
+    info["environment"]["profile"] = if cfg!(debug_assertions) {
+        "debug"
+    } else {
+        "release"
+    }
+    .into();
     std::fs::write(baseline.join("baseline.json"), info.to_string()).unwrap();
     let records_file = baseline.join("records.parquet");
     std::fs::write(&records_file, b"PAR1 nothing here").unwrap();
