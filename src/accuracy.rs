@@ -196,6 +196,8 @@ mod tests {
             cpu_model: "c".into(),
             logical_cores: 2,
             physical_cores: 2,
+            usable_cpus: 2,
+            cpu_affinity: "0-1".into(),
             memory_bytes: 1,
             os: "o".into(),
             rustc: "r".into(),

@@ -274,7 +274,7 @@ fn run_mpi(
         });
     }
     let launch = launcher::Launch {
-        ranks: ranks.map_or_else(logical_cores, NonZeroUsize::get),
+        ranks: ranks.map_or_else(usable_cpus, NonZeroUsize::get),
         launcher: args.launcher.clone(),
         timeout: std::time::Duration::from_secs_f64(args.mpi_timeout),
     };
@@ -299,8 +299,9 @@ fn run_mpi(
     )
 }
 
-fn logical_cores() -> usize {
-    crate::backend::machine_cores()
+/// The default worker count: the CPUs this process may run on.
+fn usable_cpus() -> usize {
+    crate::backend::usable_cpus()
 }
 
 /// The backend the flags ask for; worker counts only go with the backend they count.
@@ -317,7 +318,7 @@ fn backend_spec(args: &SimulateArgs) -> anyhow::Result<BackendSpec> {
         BackendName::Rayon => BackendSpec::Rayon {
             threads: args
                 .threads
-                .unwrap_or_else(|| NonZeroUsize::new(logical_cores()).unwrap_or(NonZeroUsize::MIN)),
+                .unwrap_or_else(|| NonZeroUsize::new(usable_cpus()).unwrap_or(NonZeroUsize::MIN)),
         },
         BackendName::Mpi => BackendSpec::Mpi { ranks: args.ranks },
     })

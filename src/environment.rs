@@ -4,7 +4,7 @@
 
 use std::process::Command;
 
-use crate::backend::machine_cores;
+use crate::backend::{machine_cores, usable_cpus};
 
 /// Facts recorded beside every measurement of a study.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -13,6 +13,13 @@ pub struct Environment {
     pub cpu_model: String,
     pub logical_cores: usize,
     pub physical_cores: usize,
+    /// The CPUs this process may run on (affinity and quota, see
+    /// [`crate::backend::usable_cpus`]); 0 where not recorded (older baselines).
+    #[serde(default)]
+    pub usable_cpus: usize,
+    /// The affinity mask as the kernel lists it (`Cpus_allowed_list`, e.g. `0-3`).
+    #[serde(default)]
+    pub cpu_affinity: String,
     pub memory_bytes: u64,
     pub os: String,
     /// The compiler that built this collide.
@@ -50,6 +57,11 @@ impl Environment {
             cpu_model,
             logical_cores: machine_cores(),
             physical_cores: physical_cores(&cpuinfo).unwrap_or_else(machine_cores),
+            usable_cpus: usable_cpus(),
+            cpu_affinity: read("/proc/self/status")
+                .lines()
+                .find_map(|line| line.strip_prefix("Cpus_allowed_list:"))
+                .map_or_else(|| UNKNOWN.to_owned(), |list| list.trim().to_owned()),
             memory_bytes: memory_bytes(&read("/proc/meminfo")).unwrap_or(0),
             os: os_name(),
             rustc: env!("COLLIDE_RUSTC_VERSION").to_owned(),

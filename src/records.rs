@@ -14,7 +14,7 @@ use crate::manifest::Scaling;
 use crate::output::write_atomically;
 use crate::summary::RunSummary;
 
-pub const SCHEMA_VERSION: u32 = 5;
+pub const SCHEMA_VERSION: u32 = 6;
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
 const OLDEST_READABLE_VERSION: u32 = 1;
 
@@ -57,6 +57,10 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     // no successful row had a collapse) and did not record the event method's TC time.
     (5, "collapse_time", Fill::F64(f64::NAN)),
     (5, "tc", Fill::F64(f64::NAN)),
+    // Version 5 judged oversubscription by the machine's CPUs, not those the study could
+    // use, and did not record them.
+    (6, "usable_cpus", Fill::NullU64),
+    (6, "cpu_affinity", Fill::Str("")),
 ];
 
 /// What became of one run.
@@ -145,6 +149,11 @@ pub struct Record {
     pub cpu_model: String,
     pub logical_cores: u64,
     pub physical_cores: u64,
+    /// The CPUs the study could run on (affinity mask and quota); `oversubscribed` means
+    /// more workers than these. Null in files of schema version 5 and older.
+    pub usable_cpus: Option<u64>,
+    /// Those CPUs as the kernel lists them (e.g. `0-3`); "" in older files.
+    pub cpu_affinity: String,
     pub memory_bytes: u64,
     pub os: String,
     pub rustc: String,
@@ -307,11 +316,13 @@ impl Record {
             rms_step_over_radius: f64::NAN,
             choice: String::new(),
             temperature_curve: String::new(),
-            oversubscribed: threads * ranks > env.logical_cores as u64,
+            oversubscribed: threads * ranks > env.usable_cpus as u64,
             hostname: env.hostname.clone(),
             cpu_model: env.cpu_model.clone(),
             logical_cores: env.logical_cores as u64,
             physical_cores: env.physical_cores as u64,
+            usable_cpus: Some(env.usable_cpus as u64),
+            cpu_affinity: env.cpu_affinity.clone(),
             memory_bytes: env.memory_bytes,
             os: env.os.clone(),
             rustc: env.rustc.clone(),
@@ -410,7 +421,7 @@ macro_rules! for_each_column {
             str: study, manifest_hash, build_id, config_key, scene, scaling, status, error, backend,
                  boundary, broadphase, state_hash, hostname, cpu_model, os, rustc, profile,
                  features, git_commit, mpi_library, study_started_utc, finished_utc, method,
-                 observe, choice, temperature_curve;
+                 observe, choice, temperature_curve, cpu_affinity;
             u64: threads, ranks, workers, n, steps, pair_collisions, wall_collisions,
                  logical_cores, physical_cores, memory_bytes;
             u32: repetition;
@@ -422,7 +433,7 @@ macro_rules! for_each_column {
                  pressure, compressibility_z, missed_collision_fraction, mean_overlap,
                  energy_relative_error, rms_step_over_radius, collapse_time, tc;
             bool: oversubscribed, git_dirty;
-            opt_u64: seed, missed_collisions, collapse_guard_fired
+            opt_u64: seed, missed_collisions, collapse_guard_fired, usable_cpus
         )
     };
 }

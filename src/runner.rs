@@ -112,13 +112,14 @@ pub fn run_study(
     }
     for configuration in &configurations {
         if configuration.backend != BackendName::Serial
-            && configuration.workers > environment.logical_cores
+            && configuration.workers > environment.usable_cpus
         {
             note(&format!(
-                "note: {} is oversubscribed ({} workers on {} logical cores); its rows say so",
+                "note: {} is oversubscribed ({} workers on the {} CPUs this study may use); \
+                 its rows say so",
                 configuration.key(),
                 configuration.workers,
-                environment.logical_cores
+                environment.usable_cpus
             ));
         }
     }

@@ -354,3 +354,238 @@ fn results_of_several_studies_are_shown_apart_and_never_reported_as_one() {
         );
     }
 }
+
+#[test]
+fn each_exit_code_of_the_table_is_the_one_stated_in_help() {
+    let help = text(&collide(&["--help"]).stdout);
+    for code in collide::exit::ALL {
+        assert!(
+            help.contains(&format!("{:<4} {}", code.code, code.meaning)),
+            "{help}"
+        );
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    let run = |body: &str| {
+        let path = manifest(dir.path(), body);
+        collide(&["run", &path, "--quiet", "--out", out.to_str().unwrap()])
+    };
+    let measured = run("repetitions = 1\nwarmups = 0\n[backends]\nserial = true\n");
+    assert_eq!(measured.status.code(), Some(collide::exit::DONE.code));
+    // A run killed at its timeout: the study ran, a run failed.
+    let failed = run(
+        "repetitions = 1\nwarmups = 0\ntimeout_s = 0.2\n[sweep]\nsteps = [10000000]\n\
+         [backends]\nserial = true\n",
+    );
+    assert_eq!(
+        failed.status.code(),
+        Some(collide::exit::RUNS_FAILED.code),
+        "{}",
+        text(&failed.stderr)
+    );
+    let refused = run("[backends]\n");
+    assert_eq!(refused.status.code(), Some(collide::exit::ERROR.code));
+    // Interrupted (130): `ctrl_c_stops_the_running_child_and_keeps_what_was_measured`.
+}
+
+#[test]
+fn blank_scene_names_are_refused_before_anything_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    for name in ["", "   "] {
+        let path = scene_file(
+            dir.path(),
+            "blank.toml",
+            &format!(
+                "name = \"blank\"\n[backends]\nserial = true\n[[scenes]]\nname = \"{name}\"\n\
+                 [scenes.scene]\nn = 10\npacking = 0.1\n"
+            ),
+        );
+        let output = collide(&[
+            "run",
+            path.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let stderr = text(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains("blank.toml:") && stderr.contains("is blank"),
+            "{stderr}"
+        );
+        assert!(!out.exists(), "something was written for {name:?}");
+    }
+}
+
+/// A tmpfs of 64 KiB mounted on a fresh folder, filled to the last byte; unmounted
+/// when dropped. None where this process may not mount (not root, no capability).
+struct FullDisk {
+    dir: tempfile::TempDir,
+}
+
+impl FullDisk {
+    fn mount() -> Option<FullDisk> {
+        let dir = tempfile::tempdir().unwrap();
+        let mounted = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", "size=64k", "tmpfs"])
+            .arg(dir.path())
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|status| status.success());
+        if !mounted {
+            return None;
+        }
+        let disk = FullDisk { dir };
+        let mut filler = std::fs::File::create(disk.path().join("filler")).unwrap();
+        let block = vec![0u8; 4096];
+        while std::io::Write::write_all(&mut filler, &block).is_ok() {}
+        Some(disk)
+    }
+
+    fn path(&self) -> &Path {
+        self.dir.path()
+    }
+}
+
+impl Drop for FullDisk {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(self.dir.path()).status();
+    }
+}
+
+#[test]
+fn on_a_full_disk_every_output_fails_in_words_and_leaves_no_partial_file() {
+    let Some(disk) = FullDisk::mount() else {
+        // The same message is tested with a writer that fails in `output`'s unit tests.
+        eprintln!("cannot mount a tmpfs here: the full-disk test is skipped");
+        return;
+    };
+    let full = disk.path();
+    let dir = tempfile::tempdir().unwrap();
+    let results = dir.path().join("results.parquet");
+    records::write(&results, &sample_records()).unwrap();
+    let scene = "experiments/scenes/seed-1000.toml";
+    let study = manifest(
+        dir.path(),
+        "repetitions = 1\nwarmups = 0\n[backends]\nserial = true\n",
+    );
+    let target = |name: &str| full.join(name).to_str().unwrap().to_owned();
+    let cases: Vec<Vec<String>> = vec![
+        vec![
+            "render".into(),
+            scene.into(),
+            "--steps".into(),
+            "1".into(),
+            "--png".into(),
+            target("scene.png"),
+        ],
+        vec![
+            "render".into(),
+            scene.into(),
+            "--steps".into(),
+            "2".into(),
+            "--frames".into(),
+            "2".into(),
+            "--gif".into(),
+            target("run.gif"),
+        ],
+        vec![
+            "simulate".into(),
+            scene.into(),
+            "--steps".into(),
+            "1".into(),
+            "--dump".into(),
+            target("state.csv"),
+        ],
+        vec![
+            "report".into(),
+            results.to_str().unwrap().into(),
+            "--out".into(),
+            full.to_str().unwrap().into(),
+        ],
+        vec![
+            "run".into(),
+            study,
+            "--quiet".into(),
+            "--out".into(),
+            full.to_str().unwrap().into(),
+        ],
+    ];
+    for args in &cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let output = collide(&args);
+        let stderr = text(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("is full") && stderr.contains(full.to_str().unwrap()),
+            "{args:?}: {stderr}"
+        );
+        assert!(
+            !stderr.contains("Os {") && !stderr.contains("Error("),
+            "{args:?}: {stderr}"
+        );
+    }
+    // Nothing but the filler (and the study's empty folder) is left: no half files.
+    let mut left: Vec<String> = walk(full);
+    left.sort();
+    assert_eq!(left, ["filler"], "{left:?}");
+}
+
+/// The files under `dir`, as paths relative to it.
+fn walk(dir: &Path) -> Vec<String> {
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap().flatten() {
+        let path = entry.path();
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if path.is_dir() {
+            files.extend(walk(&path).into_iter().map(|f| format!("{name}/{f}")));
+        } else {
+            files.push(name);
+        }
+    }
+    files
+}
+
+#[test]
+fn under_taskset_workers_default_to_the_allowed_cpus_and_more_are_oversubscribed() {
+    let taskset = |args: &[&str]| {
+        let output = Command::new("taskset")
+            .args(["-c", "0", env!("CARGO_BIN_EXE_collide")])
+            .args(args)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .expect("taskset (util-linux) runs");
+        assert!(
+            output.status.success(),
+            "{args:?}: {}",
+            text(&output.stderr)
+        );
+        output
+    };
+    let summary = |extra: &[&str]| -> serde_json::Value {
+        let scene = [
+            "simulate",
+            "experiments/scenes/seed-1000.toml",
+            "--steps",
+            "2",
+        ];
+        let output = taskset(&[&scene[..], &["--backend", "rayon", "--json"], extra].concat());
+        serde_json::from_str(text(&output.stdout).lines().last().unwrap()).unwrap()
+    };
+    let default = summary(&[]);
+    assert_eq!(default["threads"], 1, "{default}");
+    assert_eq!(default["oversubscribed"], false, "{default}");
+    let two = summary(&["--threads", "2"]);
+    assert_eq!(two["oversubscribed"], true, "{two}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    let path = manifest(
+        dir.path(),
+        "repetitions = 1\nwarmups = 0\n[backends]\nrayon = [2]\n",
+    );
+    taskset(&["run", &path, "--quiet", "--out", out.to_str().unwrap()]);
+    let row = rows_of(&out).remove(0);
+    assert_eq!((row.usable_cpus, row.cpu_affinity.as_str()), (Some(1), "0"));
+    assert!(row.oversubscribed);
+}
