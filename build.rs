@@ -48,7 +48,9 @@ fn git_provenance() {
     }
     let dirty = Command::new("git")
         .current_dir(&manifest_dir)
-        .args(["status", "--porcelain", "--untracked-files=no"])
+        // Without optional locks `git status` leaves the index alone: rewriting it would
+        // rerun this script, and rebuild collide, on every build.
+        .args(["--no-optional-locks", "status", "--porcelain", "--untracked-files=no"])
         .output()
         .is_ok_and(|out| out.status.success() && !out.stdout.is_empty());
     println!("cargo::rustc-env=COLLIDE_GIT_COMMIT={commit}");

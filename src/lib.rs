@@ -15,6 +15,7 @@ pub mod cli;
 pub mod environment;
 pub mod exit;
 pub mod figures;
+pub mod limits;
 pub mod manifest;
 pub mod output;
 pub mod process;

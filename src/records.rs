@@ -588,6 +588,24 @@ pub fn read(path: &Path) -> anyhow::Result<Vec<Record>> {
     from_frame(&frame).with_context(|| format!("{}", path.display()))
 }
 
+/// A serial run's context for unit tests: one worker, repetition 0, placeholder names.
+#[cfg(test)]
+pub(crate) fn serial_context(environment: &Environment) -> RecordContext<'_> {
+    RecordContext {
+        study: "s",
+        manifest_hash: "m",
+        build_id: "b",
+        config_key: "k",
+        scene: "gas",
+        scaling: "strong",
+        backend: "serial",
+        workers: 1,
+        repetition: 0,
+        environment,
+        study_started_utc: "2026-11-22T18:00:00Z",
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

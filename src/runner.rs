@@ -370,19 +370,7 @@ mod tests {
     #[test]
     fn a_run_that_exits_0_without_a_summary_keeps_the_reason_and_what_it_printed() {
         let environment = Environment::capture();
-        let context = RecordContext {
-            study: "s",
-            manifest_hash: "m",
-            build_id: "b",
-            config_key: "k",
-            scene: "gas",
-            scaling: "strong",
-            backend: "serial",
-            workers: 1,
-            repetition: 0,
-            environment: &environment,
-            study_started_utc: "2026-11-23T00:00:00Z",
-        };
+        let context = records::serial_context(&environment);
         let ended = |code: i32, stdout: &str| Ended::Exited {
             status: ExitStatus::from_raw(code << 8),
             stdout: stdout.to_owned(),

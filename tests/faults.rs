@@ -371,7 +371,10 @@ fn each_exit_code_of_the_table_is_the_one_stated_in_help() {
         collide(&["run", &path, "--quiet", "--out", out.to_str().unwrap()])
     };
     let measured = run("repetitions = 1\nwarmups = 0\n[backends]\nserial = true\n");
-    assert_eq!(measured.status.code(), Some(collide::exit::DONE.code));
+    assert_eq!(
+        measured.status.code(),
+        Some(i32::from(collide::exit::DONE.code))
+    );
     // A run killed at its timeout: the study ran, a run failed.
     let failed = run(
         "repetitions = 1\nwarmups = 0\ntimeout_s = 0.2\n[sweep]\nsteps = [10000000]\n\
@@ -379,12 +382,15 @@ fn each_exit_code_of_the_table_is_the_one_stated_in_help() {
     );
     assert_eq!(
         failed.status.code(),
-        Some(collide::exit::RUNS_FAILED.code),
+        Some(i32::from(collide::exit::RUNS_FAILED.code)),
         "{}",
         text(&failed.stderr)
     );
     let refused = run("[backends]\n");
-    assert_eq!(refused.status.code(), Some(collide::exit::ERROR.code));
+    assert_eq!(
+        refused.status.code(),
+        Some(i32::from(collide::exit::ERROR.code))
+    );
     // Interrupted (130): `ctrl_c_stops_the_running_child_and_keeps_what_was_measured`.
 }
 

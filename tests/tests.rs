@@ -6,6 +6,7 @@ mod backends;
 mod check;
 mod cli;
 mod faults;
+mod limits;
 #[cfg(feature = "mpi")]
 mod mpi;
 mod physics;
