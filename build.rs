@@ -50,7 +50,12 @@ fn git_provenance() {
         .current_dir(&manifest_dir)
         // Without optional locks `git status` leaves the index alone: rewriting it would
         // rerun this script, and rebuild collide, on every build.
-        .args(["--no-optional-locks", "status", "--porcelain", "--untracked-files=no"])
+        .args([
+            "--no-optional-locks",
+            "status",
+            "--porcelain",
+            "--untracked-files=no",
+        ])
         .output()
         .is_ok_and(|out| out.status.success() && !out.stdout.is_empty());
     println!("cargo::rustc-env=COLLIDE_GIT_COMMIT={commit}");

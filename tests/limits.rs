@@ -124,8 +124,10 @@ const FIELDS: &[&str] = &[
     "scene.gravity",
     "method.dt",
     "method.steps",
-    // Placement refusals name the packing the box could not hold.
+    // Placement refusals name the packing the box could not hold, or the boundary whose
+    // periodic box is too small for its disks.
     "packing",
+    "boundary",
 ];
 
 /// Refused naming a field (as `collide` would, with exit code 2), or run to a finite
