@@ -209,7 +209,7 @@ fn draw(figure: Figure, setup: &Setup, root: &Canvas<'_>) -> anyhow::Result<()> 
     );
     // Ticks at the measured worker counts: a log axis' own ticks skip most of them.
     let x_ticks: Vec<f64> = workers.iter().map(|&p| p as f64).collect();
-    let mut chart = ChartBuilder::on(&root)
+    let mut chart = ChartBuilder::on(root)
         .caption(caption, (FONT, 24))
         .margin(16)
         .x_label_area_size(50)

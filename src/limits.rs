@@ -104,6 +104,11 @@ fn derive(scene: &SceneSource) -> Derived {
     }
 }
 
+/// Whether `value` is a number (not NaN or infinite) no larger than `limit`.
+fn within(value: f64, limit: f64) -> bool {
+    value.is_finite() && value <= limit
+}
+
 /// The first derived quantity of `scene` run by `method` that is not finite or out of
 /// its range, if any.
 pub fn check(scene: &SceneSource, method: &MethodSpec) -> Option<Violation> {
@@ -137,7 +142,7 @@ pub fn check(scene: &SceneSource, method: &MethodSpec) -> Option<Violation> {
         );
     }
     let box_in_radii = d.box_side / d.min_radius;
-    if !(box_in_radii <= MAX_BOX_IN_RADII) {
+    if !within(box_in_radii, MAX_BOX_IN_RADII) {
         return violation(
             box_field,
             format!(
@@ -181,7 +186,7 @@ pub fn check(scene: &SceneSource, method: &MethodSpec) -> Option<Violation> {
         return None;
     };
     let fall = 0.5 * d.gravity * dt * dt / d.min_radius;
-    if !(fall <= MAX_STEP_IN_RADII) {
+    if !within(fall, MAX_STEP_IN_RADII) {
         return violation(
             Field::Gravity,
             format!(
@@ -193,7 +198,7 @@ pub fn check(scene: &SceneSource, method: &MethodSpec) -> Option<Violation> {
     }
     let step = d.speed_rms * dt;
     let step_in_radii = step / d.min_radius;
-    if !(step_in_radii <= MAX_STEP_IN_RADII) {
+    if !within(step_in_radii, MAX_STEP_IN_RADII) {
         return violation(
             Field::Dt,
             format!(
