@@ -43,6 +43,8 @@ struct Derived {
     box_area: f64,
     min_radius: f64,
     speed_rms: f64,
+    /// The smallest disk mass (a gas: its one mass, or the smallest disk's area).
+    min_mass: f64,
     kinetic_energy: f64,
     gravity: f64,
     /// Whether the box was given (`size`, or listed disks) or follows from the packing.
@@ -69,8 +71,13 @@ fn derive(scene: &SceneSource) -> Derived {
                 MassRule::Fixed(m) => m,
                 MassRule::Area => gas.radius.mean_area(),
             };
+            let min_mass = match gas.mass {
+                MassRule::Fixed(m) => m,
+                MassRule::Area => std::f64::consts::PI * min_radius * min_radius,
+            };
             Derived {
                 n,
+                min_mass,
                 box_side,
                 box_area,
                 min_radius,
@@ -90,6 +97,7 @@ fn derive(scene: &SceneSource) -> Derived {
                 box_area: width * height,
                 min_radius: particles.min_radius(),
                 speed_rms: particles.rms_speed(),
+                min_mass: particles.mass.iter().fold(f64::INFINITY, |a, &m| a.min(m)),
                 kinetic_energy: (0..particles.len())
                     .map(|i| {
                         let v2 = particles.vx[i].powi(2) + particles.vy[i].powi(2);
@@ -150,6 +158,22 @@ pub fn check(scene: &SceneSource, method: &MethodSpec) -> Option<Violation> {
                  within which positions resolve a disk"
             ),
             box_fix,
+        );
+    }
+    if !d.min_mass.is_normal() {
+        let field = if d.listed {
+            Field::Particles
+        } else {
+            Field::Mass
+        };
+        return violation(
+            field,
+            format!(
+                "makes a disk of mass {:e}, below the {:e} where f64 keeps its precision",
+                d.min_mass,
+                f64::MIN_POSITIVE
+            ),
+            "give masses of ordinary size, e.g. mass = 1.0, or mass = \"area\"",
         );
     }
     if !d.kinetic_energy.is_finite() {
