@@ -209,6 +209,8 @@ mod tests {
             cpu_model: "c".into(),
             logical_cores: 2,
             physical_cores: 2,
+            usable_cpus: 2,
+            cpu_affinity: "0-1".into(),
             memory_bytes: 1,
             os: "o".into(),
             rustc: "r".into(),
@@ -221,16 +223,7 @@ mod tests {
         };
         let context = RecordContext {
             study: "accuracy",
-            manifest_hash: "m",
-            build_id: "b",
-            config_key: "k",
-            scene: "gas",
-            scaling: "strong",
-            backend: "serial",
-            workers: 1,
-            repetition: 0,
-            environment: &environment,
-            study_started_utc: "2026-11-22T18:00:00Z",
+            ..crate::records::serial_context(&environment)
         };
         let mut record = Record::failed(&context, STATUS_OK, String::new());
         record.status = STATUS_OK.to_owned();

@@ -15,6 +15,7 @@ use crate::accuracy::{
     pareto_front,
 };
 use crate::figures::{FONT, PALETTE, draw_legend, register_font};
+use crate::output::{Canvas, write_png};
 
 /// File names of the two figures.
 pub const PARETO_FILE: &str = "accuracy-pareto.png";
@@ -30,9 +31,11 @@ const ERROR_FLOOR: f64 = 1e-5;
 pub fn draw(groups: &[PackingGroup], dir: &Path) -> anyhow::Result<(PathBuf, PathBuf)> {
     register_font();
     let pareto = dir.join(PARETO_FILE);
-    draw_pareto(groups, &pareto)?;
+    write_png(&pareto, PARETO_SIZE, |canvas| draw_pareto(groups, canvas))?;
     let stability = dir.join(STABILITY_FILE);
-    draw_stability(groups, &stability)?;
+    write_png(&stability, STABILITY_SIZE, |canvas| {
+        draw_stability(groups, canvas)
+    })?;
     Ok((pareto, stability))
 }
 
@@ -41,23 +44,20 @@ fn plotted(error: f64) -> f64 {
     error.abs().max(ERROR_FLOOR)
 }
 
-/// A white PNG canvas of `size` at `path` with `title` across its top; the area below.
+/// `root` filled white with `title` across its top; the area below.
 fn titled_canvas<'a>(
-    path: &'a Path,
-    size: (u32, u32),
+    root: &Canvas<'a>,
     title: &str,
     title_size: u32,
-) -> anyhow::Result<DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>> {
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+) -> anyhow::Result<Canvas<'a>> {
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
     root.titled(title, (FONT, title_size))
         .map_err(|e| anyhow!("{e}"))
 }
 
-fn draw_pareto(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
+fn draw_pareto(groups: &[PackingGroup], canvas: &Canvas<'_>) -> anyhow::Result<()> {
     let root = titled_canvas(
-        path,
-        PARETO_SIZE,
+        canvas,
         "Speed against accuracy: step method (points, large dt on the left) and event reference (dashed)",
         22,
     )?;
@@ -170,14 +170,11 @@ fn draw_pareto(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
             draw_legend(&mut chart, SeriesLabelPosition::LowerRight, 14)?;
         }
     }
-    root.present().map_err(|e| anyhow!("{e}"))?;
     Ok(())
 }
 
 /// The stability map's colour scale: missed-collision fraction, log, floor to 1.
-fn draw_colour_scale(
-    area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
-) -> anyhow::Result<()> {
+fn draw_colour_scale(area: &Canvas<'_>) -> anyhow::Result<()> {
     let mut chart = ChartBuilder::on(area)
         .margin_top(16)
         .margin_bottom(66)
@@ -239,7 +236,7 @@ fn missed_colour(fraction: f64) -> RGBColor {
     )
 }
 
-fn draw_stability(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
+fn draw_stability(groups: &[PackingGroup], canvas: &Canvas<'_>) -> anyhow::Result<()> {
     // Columns: the distinct v_rms·dt/r of the step runs, ascending; rows: the packings.
     let mut columns: Vec<f64> = groups
         .iter()
@@ -251,8 +248,7 @@ fn draw_stability(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
     let column_of = |x: f64| columns.iter().position(|c| (x / c - 1.0).abs() < 0.02);
     let (nx, ny) = (columns.len().max(1), groups.len().max(1));
     let root = titled_canvas(
-        path,
-        STABILITY_SIZE,
+        canvas,
         &format!(
             "Stability map of the step method: missed-collision fraction (m) and max overlap (ov); black line: m = {FAILURE_MISSED_FRACTION:e}"
         ),
@@ -352,7 +348,6 @@ fn draw_stability(groups: &[PackingGroup], path: &Path) -> anyhow::Result<()> {
                 .map(|edge| PathElement::new(edge, BLACK.stroke_width(4))),
         )
         .map_err(|e| anyhow!("{e}"))?;
-    root.present().map_err(|e| anyhow!("{e}"))?;
     Ok(())
 }
 
@@ -366,14 +361,13 @@ const COOLING_SIZE: (u32, u32) = (1400, 620);
 pub fn draw_cooling(curves: &[CoolingCurve], dir: &Path) -> anyhow::Result<PathBuf> {
     register_font();
     let path = dir.join(COOLING_FILE);
-    plot_cooling(curves, &path)?;
+    write_png(&path, COOLING_SIZE, |canvas| plot_cooling(curves, canvas))?;
     Ok(path)
 }
 
-fn plot_cooling(curves: &[CoolingCurve], path: &Path) -> anyhow::Result<()> {
+fn plot_cooling(curves: &[CoolingCurve], canvas: &Canvas<'_>) -> anyhow::Result<()> {
     let root = titled_canvas(
-        path,
-        COOLING_SIZE,
+        canvas,
         "Cooling (e < 1): T/T₀ against t/t₀, Haff's law in black, broken-down runs dashed, collapse ×",
         22,
     )?;
@@ -388,7 +382,6 @@ fn plot_cooling(curves: &[CoolingCurve], path: &Path) -> anyhow::Result<()> {
             .collect();
         plot_cooling_panel(panel, packing, &group)?;
     }
-    root.present().map_err(|e| anyhow!("{e}"))?;
     Ok(())
 }
 
@@ -404,7 +397,7 @@ const COOLING_COLOURS: [RGBColor; 6] = [
 ];
 
 fn plot_cooling_panel(
-    panel: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    panel: &Canvas<'_>,
     packing: f64,
     curves: &[&CoolingCurve],
 ) -> anyhow::Result<()> {

@@ -11,6 +11,7 @@ use crate::check::{CheckOptions, CheckOutcome};
 use crate::cli::{
     BackendName, CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs, ViewArgs,
 };
+use crate::exit::RunsFailed;
 use crate::limits::{Machine, WorkerSource, check_memory, check_workers, placement_note};
 use crate::output::{check_output_file, write_atomically, write_state_csv};
 use crate::records::{self, Record, STATUS_OK};
@@ -29,7 +30,7 @@ use crate::{
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Outcome {
     Done,
-    /// `collide check` found a regression (exit code 1).
+    /// `collide check` found a regression ([`crate::exit::RUNS_FAILED`]).
     Regressed,
 }
 
@@ -38,7 +39,7 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Simulate(args) => simulate(&args),
         Command::Run(args) => run_study(&args),
         Command::Results(args) => {
-            print!("{}", results::summary(&results::load(&args.path)?)?);
+            print!("{}", results::show(&args.path)?);
             Ok(())
         }
         Command::Report(args) => write_report(&args),
@@ -146,7 +147,7 @@ const SCENE_PICTURE: &str = "scene.png";
 
 fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
     let records = results::load(&args.path)?;
-    let study = records.first().map_or("study", |r| r.study.as_str());
+    let study = results::one_study(&records, &args.path)?;
     let out = match &args.out {
         Some(out) => out.clone(),
         None => {
@@ -262,11 +263,12 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
         }
     }
     if outcome.failed > 0 {
-        bail!(
+        return Err(RunsFailed(format!(
             "{} run(s) failed; their rows in {} say why (status, error)",
             outcome.failed,
             outcome.results.display()
-        );
+        ))
+        .into());
     }
     Ok(())
 }
@@ -280,7 +282,7 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let mut spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
     // Every rank of an MPI run builds all the disks.
     let copies = match backend {
-        BackendSpec::Mpi { ranks } => ranks.map_or_else(logical_cores, NonZeroUsize::get),
+        BackendSpec::Mpi { ranks } => ranks.map_or_else(usable_cpus, NonZeroUsize::get),
         BackendSpec::Serial | BackendSpec::Rayon { .. } => 1,
     };
     check_fits(&args.scene, &spec, copies, &machine)?;
@@ -367,7 +369,7 @@ fn run_mpi(
         });
     }
     let launch = launcher::Launch {
-        ranks: ranks.map_or_else(logical_cores, NonZeroUsize::get),
+        ranks: ranks.map_or_else(usable_cpus, NonZeroUsize::get),
         launcher: args.launcher.clone(),
         timeout: std::time::Duration::from_secs_f64(args.mpi_timeout),
     };
@@ -391,8 +393,9 @@ fn run_mpi(
     )
 }
 
-fn logical_cores() -> usize {
-    crate::backend::machine_cores()
+/// The default worker count: the CPUs this process may run on.
+fn usable_cpus() -> usize {
+    crate::backend::usable_cpus()
 }
 
 /// The backend the flags ask for; worker counts only go with the backend they count, and
@@ -420,7 +423,7 @@ fn backend_spec(args: &SimulateArgs, machine: &Machine) -> anyhow::Result<Backen
         BackendName::Rayon => BackendSpec::Rayon {
             threads: args
                 .threads
-                .unwrap_or_else(|| NonZeroUsize::new(logical_cores()).unwrap_or(NonZeroUsize::MIN)),
+                .unwrap_or_else(|| NonZeroUsize::new(usable_cpus()).unwrap_or(NonZeroUsize::MIN)),
         },
         BackendName::Mpi => BackendSpec::Mpi { ranks: args.ranks },
     })

@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::cli::BackendName;
 use crate::environment::Environment;
+use crate::exit::RunsFailed;
 use crate::manifest::{self, Configuration};
 use crate::output::write_atomically;
 use crate::records::{self, Record, STATUS_OK};
@@ -154,11 +155,12 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
     };
     let outcome = runner::run_study(&study, &text, &run_options)?;
     if outcome.failed > 0 {
-        bail!(
+        return Err(RunsFailed(format!(
             "{} run(s) of the check failed; their rows in {} say why (status, error)",
             outcome.failed,
             outcome.results.display()
-        );
+        ))
+        .into());
     }
     let rows = records::read(&outcome.results)?;
     let serial = study

@@ -14,11 +14,16 @@ use crate::spec::{MethodChoice, Observe};
     name = "collide",
     version,
     about = "2D hard-disk collision simulator and scaling-study harness",
-    after_help = EXAMPLES
+    after_help = top_help()
 )]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
+}
+
+/// The top command's help ends in examples, then the exit-code table.
+fn top_help() -> String {
+    format!("{EXAMPLES}\n\n{}", crate::exit::help())
 }
 
 // Examples end each `--help`; a unit test parses every `collide ...` line of them.
@@ -111,7 +116,7 @@ pub enum Command {
     #[command(after_help = VIEW_EXAMPLES)]
     View(ViewArgs),
     /// CI timing check: run a small manifest and compare it with a recorded baseline
-    /// (exit 0: nothing regressed, 1: a regression, 2: an error).
+    /// (exit 0: nothing regressed, 1: a regression or failed runs, 2: an error).
     #[command(after_help = CHECK_EXAMPLES)]
     Check(CheckArgs),
     /// Time the fixed calibration workload that `collide check` normalises by.

@@ -1,9 +1,10 @@
-//! The machine and build a study ran on, captured once per study (Linux `/proc` and a
-//! few commands; anything unavailable is recorded as "unknown").
+//! The machine and build a study ran on, captured once per study (Linux `/proc`, a
+//! command or two, and what `build.rs` recorded of the build; anything unavailable is
+//! recorded as "unknown").
 
 use std::process::Command;
 
-use crate::backend::machine_cores;
+use crate::backend::{machine_cores, usable_cpus};
 
 /// Facts recorded beside every measurement of a study.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -12,6 +13,13 @@ pub struct Environment {
     pub cpu_model: String,
     pub logical_cores: usize,
     pub physical_cores: usize,
+    /// The CPUs this process may run on (affinity and quota, see
+    /// [`crate::backend::usable_cpus`]); 0 where not recorded (older baselines).
+    #[serde(default)]
+    pub usable_cpus: usize,
+    /// The affinity mask as the kernel lists it (`Cpus_allowed_list`, e.g. `0-3`).
+    #[serde(default)]
+    pub cpu_affinity: String,
     pub memory_bytes: u64,
     pub os: String,
     /// The compiler that built this collide.
@@ -20,7 +28,8 @@ pub struct Environment {
     pub profile: String,
     /// Cargo features compiled in, comma-separated ("" for none).
     pub features: String,
-    /// The working tree's commit and state when the study ran (`git` in the current folder).
+    /// The commit this collide was built from ("unknown" outside a git checkout), and
+    /// whether its tracked files had uncommitted changes then (see `build.rs`).
     pub git_commit: String,
     pub git_dirty: bool,
     /// The MPI library's first `mpirun --version` line; "none" without the mpi feature.
@@ -43,17 +52,17 @@ impl Environment {
             .into_iter()
             .filter_map(|(name, on)| on.then_some(name))
             .collect();
-        let git_commit = command_line("git", &["rev-parse", "--short=12", "HEAD"]);
-        let git_dirty = Command::new("git")
-            .args(["status", "--porcelain", "--untracked-files=no"])
-            .output()
-            .is_ok_and(|out| out.status.success() && !out.stdout.is_empty());
         Environment {
             hostname: first_line(&read("/proc/sys/kernel/hostname")),
             cpu_model,
             logical_cores: machine_cores(),
             physical_cores: physical_cores(&cpuinfo).unwrap_or_else(machine_cores),
-            memory_bytes: machine_memory_bytes().unwrap_or(0),
+            usable_cpus: usable_cpus(),
+            cpu_affinity: read("/proc/self/status")
+                .lines()
+                .find_map(|line| line.strip_prefix("Cpus_allowed_list:"))
+                .map_or_else(|| UNKNOWN.to_owned(), |list| list.trim().to_owned()),
+            memory_bytes: memory_bytes(&read("/proc/meminfo")).unwrap_or(0),
             os: os_name(),
             rustc: env!("COLLIDE_RUSTC_VERSION").to_owned(),
             profile: if cfg!(debug_assertions) {
@@ -63,8 +72,8 @@ impl Environment {
             }
             .to_owned(),
             features: features.join(","),
-            git_commit,
-            git_dirty,
+            git_commit: env!("COLLIDE_GIT_COMMIT").to_owned(),
+            git_dirty: env!("COLLIDE_GIT_DIRTY") == "true",
             mpi_library: if cfg!(feature = "mpi") {
                 command_line("mpirun", &["--version"])
             } else {

@@ -5,11 +5,12 @@
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 
-use anyhow::{Context, anyhow};
+use anyhow::anyhow;
 use plotters::prelude::*;
 
 use crate::analysis::{BackendScaling, Setup};
 use crate::manifest::Scaling;
+use crate::output::{Canvas, write_png};
 
 pub(crate) const FONT: &str = "sans-serif";
 const SIZE: (u32, u32) = (900, 560);
@@ -153,13 +154,13 @@ pub fn draw_setup(
     let mut drawn = Vec::new();
     for figure in Figure::ALL {
         let path = dir.join(format!("{prefix}-{}.png", figure.file_stem()));
-        draw(figure, setup, &path).with_context(|| format!("cannot draw {}", path.display()))?;
+        write_png(&path, SIZE, |canvas| draw(figure, setup, canvas))?;
         drawn.push((figure, path));
     }
     Ok(drawn)
 }
 
-fn draw(figure: Figure, setup: &Setup, path: &Path) -> anyhow::Result<()> {
+fn draw(figure: Figure, setup: &Setup, root: &Canvas<'_>) -> anyhow::Result<()> {
     let backends: Vec<&BackendScaling> = setup
         .backends
         .iter()
@@ -197,7 +198,6 @@ fn draw(figure: Figure, setup: &Setup, path: &Path) -> anyhow::Result<()> {
     }
     let (y_low, y_high) = (low / 1.5, high * 1.5);
 
-    let root = BitMapBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
     let n = match setup.scaling {
         Scaling::Strong => format!("n = {}", setup.n),
@@ -211,7 +211,7 @@ fn draw(figure: Figure, setup: &Setup, path: &Path) -> anyhow::Result<()> {
     );
     // Ticks at the measured worker counts: a log axis' own ticks skip most of them.
     let x_ticks: Vec<f64> = workers.iter().map(|&p| p as f64).collect();
-    let mut chart = ChartBuilder::on(&root)
+    let mut chart = ChartBuilder::on(root)
         .caption(caption, (FONT, 24))
         .margin(16)
         .x_label_area_size(50)
@@ -284,9 +284,7 @@ fn draw(figure: Figure, setup: &Setup, path: &Path) -> anyhow::Result<()> {
             )
             .map_err(|e| anyhow!("{e}"))?;
     }
-    draw_legend(&mut chart, figure.legend_position(), 15)?;
-    root.present().map_err(|e| anyhow!("{e}"))?;
-    Ok(())
+    draw_legend(&mut chart, figure.legend_position(), 15)
 }
 
 /// The series labels of every figure: framed, on a translucent white, at `position`.

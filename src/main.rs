@@ -1,18 +1,25 @@
-//! The `collide` command: parse, run, map outcomes to exit codes (0 done, 1 a timing
-//! regression found by `collide check`, 2 an error).
+//! The `collide` command: parse, run, map outcomes to exit codes (declared in
+//! [`collide::exit`]).
 
 use std::process::ExitCode;
 
 use clap::Parser;
 
+use collide::app::Outcome;
+use collide::exit;
+
 fn main() -> ExitCode {
     let cli = collide::cli::Cli::parse();
-    match collide::app::run(cli) {
-        Ok(collide::app::Outcome::Done) => ExitCode::SUCCESS,
-        Ok(collide::app::Outcome::Regressed) => ExitCode::from(1),
+    let code = match collide::app::run(cli) {
+        Ok(Outcome::Done) => exit::DONE,
+        Ok(Outcome::Regressed) => exit::RUNS_FAILED,
         Err(err) => {
             eprintln!("error: {err:#}");
-            ExitCode::from(2)
+            match err.downcast_ref::<exit::RunsFailed>() {
+                Some(_) => exit::RUNS_FAILED,
+                None => exit::ERROR,
+            }
         }
-    }
+    };
+    ExitCode::from(code.code)
 }

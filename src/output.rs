@@ -1,12 +1,15 @@
-//! Files the tool writes: atomic replacement (through temporary files that a later run
-//! can recognise and remove), checks of output paths before any work, and the CSV
-//! state dump.
+//! Files the tool writes: atomic replacement (every output goes through it, by
+//! temporary files that a later run can recognise and remove), checks of output paths
+//! before any work, errors that say in words what went wrong and where (a full disk as
+//! such), PNG and GIF pictures encoded from memory, and the CSV state dump.
 
-use std::io::{BufWriter, Write};
+use std::io::{BufWriter, ErrorKind, Write};
 use std::os::unix::fs::PermissionsExt;
 use std::path::Path;
 
-use anyhow::{Context, bail};
+use anyhow::{Context, anyhow, bail};
+use plotters::coord::Shift;
+use plotters::prelude::{BitMapBackend, DrawingArea, IntoDrawingArea};
 
 use crate::sim::Particles;
 
@@ -14,6 +17,9 @@ use crate::sim::Particles;
 /// reader takes one for results), and recognisable by [`remove_leftovers`].
 const TEMP_PREFIX: &str = ".collide-";
 const TEMP_SUFFIX: &str = ".partial";
+
+/// A picture being drawn, in memory (RGB).
+pub type Canvas<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
 /// Writes a file through a temporary sibling and renames it into place, so readers
 /// never see a half-written file and a failure leaves any earlier file untouched.
@@ -29,25 +35,32 @@ pub fn write_atomically(
         .prefix(TEMP_PREFIX)
         .suffix(TEMP_SUFFIX)
         .tempfile_in(dir)
-        .with_context(|| {
-            format!(
-                "cannot create a file in {}; check that the directory exists and is writable",
-                dir.display()
+        .map_err(|err| {
+            described(
+                err,
+                format!(
+                    "cannot create a file in {}; check that the directory exists and is writable",
+                    dir.display()
+                ),
+                dir,
             )
         })?;
     {
         let mut writer = BufWriter::new(temp.as_file());
         write(&mut writer).and_then(|()| writer.flush())
     }
-    .with_context(|| format!("cannot write {}", path.display()))?;
+    .map_err(|err| described(err, format!("cannot write {}", path.display()), dir))?;
     // Temporary files are private (0600); a finished result is an ordinary file.
     temp.as_file()
         .set_permissions(std::fs::Permissions::from_mode(0o644))
         .with_context(|| format!("cannot make {} readable", path.display()))?;
-    // The persist error's text is its I/O error's: keep only the I/O error, said once.
-    temp.persist(path)
-        .map_err(|failed| failed.error)
-        .with_context(|| format!("cannot move the finished file to {}", path.display()))?;
+    temp.persist(path).map_err(|err| {
+        described(
+            err.error,
+            format!("cannot move the finished file to {}", path.display()),
+            dir,
+        )
+    })?;
     Ok(())
 }
 
@@ -127,6 +140,98 @@ pub fn without_os_code(text: String) -> String {
     }
 }
 
+/// An I/O error as a sentence: `what` failed, and why; a full disk (or quota) is said
+/// as such, with the folder whose disk it is, and the fix.
+fn described(err: std::io::Error, what: String, dir: &Path) -> anyhow::Error {
+    match err.kind() {
+        ErrorKind::StorageFull | ErrorKind::QuotaExceeded => anyhow!(
+            "{what}: the disk holding {} is full (no space left, or over quota); nothing was \
+             written there; free some space, or write to another folder",
+            dir.display()
+        ),
+        _ => anyhow::Error::new(err).context(what),
+    }
+}
+
+/// Draws a picture of `size` pixels in memory with `draw`, then writes it to `path` as
+/// a PNG, atomically.
+pub fn write_png(
+    path: &Path,
+    size: (u32, u32),
+    draw: impl FnOnce(&Canvas<'_>) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let mut pixels = vec![0; rgb_bytes(size)];
+    {
+        let canvas = BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area();
+        draw(&canvas).with_context(|| format!("cannot draw {}", path.display()))?;
+        canvas.present().map_err(|e| anyhow!("{e}"))?;
+    }
+    write_atomically(path, |out| {
+        let mut encoder = png::Encoder::new(out, size.0, size.1);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().map_err(png_io)?;
+        writer.write_image_data(&pixels).map_err(png_io)?;
+        writer.finish().map_err(png_io)
+    })
+}
+
+/// Writes an animated GIF of `frames` pictures of `size` pixels to `path`, atomically:
+/// `draw(k, canvas)` draws frame k; frames follow each other every `delay_cs`
+/// hundredths of a second, and the animation repeats.
+pub fn write_gif(
+    path: &Path,
+    size: (u32, u32),
+    frames: u32,
+    delay_cs: u16,
+    mut draw: impl FnMut(u32, &Canvas<'_>) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let (width, height) = (gif_side(size.0)?, gif_side(size.1)?);
+    let mut pixels = vec![0; rgb_bytes(size)];
+    write_atomically(path, |out| {
+        let mut encoder = gif::Encoder::new(out, width, height, &[]).map_err(gif_io)?;
+        encoder.set_repeat(gif::Repeat::Infinite).map_err(gif_io)?;
+        for frame in 0..frames {
+            {
+                let canvas = BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area();
+                draw(frame, &canvas)
+                    .and_then(|()| canvas.present().map_err(|e| anyhow!("{e}")))
+                    .map_err(|e| {
+                        std::io::Error::other(format!("cannot draw frame {frame}: {e:#}"))
+                    })?;
+            }
+            // Speed 10 of 1 (best) to 30 (fastest) quantises the colours well enough.
+            let mut image = gif::Frame::from_rgb_speed(width, height, &pixels, 10);
+            image.delay = delay_cs;
+            encoder.write_frame(&image).map_err(gif_io)?;
+        }
+        Ok(())
+    })
+}
+
+fn rgb_bytes(size: (u32, u32)) -> usize {
+    size.0 as usize * size.1 as usize * 3
+}
+
+fn gif_side(pixels: u32) -> anyhow::Result<u16> {
+    u16::try_from(pixels).map_err(|_| anyhow!("a GIF is at most 65535 pixels wide, not {pixels}"))
+}
+
+/// The encoder's I/O error as it was (a full disk stays one), its other errors as text.
+fn png_io(err: png::EncodingError) -> std::io::Error {
+    match err {
+        png::EncodingError::IoError(err) => err,
+        other => std::io::Error::other(other.to_string()),
+    }
+}
+
+fn gif_io(err: gif::EncodingError) -> std::io::Error {
+    match err {
+        gif::EncodingError::Io(err) => err,
+        other => std::io::Error::other(other.to_string()),
+    }
+}
+
 /// The state as CSV, header `id,x,y,vx,vy,radius,mass`, one row per disk in id order.
 /// Numbers are printed in Rust's shortest round-trip form, so they read back to the same bits.
 pub fn write_state_csv(out: &mut dyn Write, particles: &Particles) -> std::io::Result<()> {
@@ -139,4 +244,43 @@ pub fn write_state_csv(out: &mut dyn Write, particles: &Particles) -> std::io::R
         )?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failed_write_leaves_no_file_and_a_full_disk_is_said_in_words() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("out.png");
+        std::fs::write(&path, "the earlier file").unwrap();
+        let full = write_atomically(&path, |out| {
+            out.write_all(b"half a picture")?;
+            Err(std::io::Error::from(ErrorKind::StorageFull))
+        })
+        .unwrap_err();
+        let message = format!("{full:#}");
+        assert!(
+            message.contains("out.png") && message.contains("is full"),
+            "{message}"
+        );
+        assert!(
+            message.contains(&dir.path().display().to_string()),
+            "{message}"
+        );
+        assert!(
+            !message.contains("StorageFull") && !message.contains("Os {"),
+            "{message}"
+        );
+        let other =
+            write_atomically(&path, |_| Err(std::io::Error::other("a reason"))).unwrap_err();
+        assert!(
+            format!("{other:#}").ends_with("out.png: a reason"),
+            "{other:#}"
+        );
+        // The earlier file is untouched and no temporary file is left.
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "the earlier file");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
 }

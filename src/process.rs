@@ -1,7 +1,8 @@
 //! Child processes under a timeout: output captured, each child in its own process
 //! group so that everything it starts (an MPI launcher's ranks) can be stopped with it,
 //! on timeout or when collide itself is interrupted (Ctrl-C, SIGTERM), which then says
-//! what was kept.
+//! what was kept, and tied to collide's life so that a hard kill (`kill -9`, the OOM
+//! killer) leaves no orphan.
 
 use std::collections::BTreeSet;
 use std::io::Read;
@@ -48,7 +49,8 @@ pub fn interrupt_note() -> MutexGuard<'static, Option<String>> {
 
 /// On Ctrl-C or SIGTERM, waits for any write of results to finish, interrupts every
 /// running child's group (a child that launched MPI ranks stops them in turn), prints
-/// the [`interrupt_note`], then exits with code 130. Call once, early.
+/// the [`interrupt_note`], then exits with code 130 ([`crate::exit::INTERRUPTED`]).
+/// Call once, early.
 pub fn stop_children_on_interrupt() {
     let installed = ctrlc::set_handler(|| {
         let note = interrupt_note();
@@ -59,7 +61,7 @@ pub fn stop_children_on_interrupt() {
             signal_group(group, Signal::INT);
         }
         eprintln!("{}", note.as_deref().unwrap_or(NOTHING_KEPT));
-        std::process::exit(130);
+        std::process::exit(i32::from(crate::exit::INTERRUPTED.code));
     });
     // A second call in the same process fails; the first handler stays, which is right.
     let _ = installed;
@@ -81,6 +83,7 @@ pub fn run_with_timeout(mut command: Command, timeout: Duration) -> std::io::Res
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .process_group(0);
+    die_with_this_process(&mut command);
     let mut child = command.spawn()?;
     // The child leads its own group (process_group(0)): its pid is the group id.
     let group = child.id() as i32;
@@ -125,6 +128,32 @@ pub fn run_with_timeout(mut command: Command, timeout: Duration) -> std::io::Res
         _ => Ended::TimedOut { stderr },
     })
 }
+
+/// Makes the child receive SIGTERM when this process dies, however it dies: a child
+/// `collide simulate` then ends, and an MPI launcher stops its ranks (a child that
+/// launched one passes the signal on through [`stop_children_on_interrupt`]). Linux
+/// delivers it when the spawning thread ends: collide spawns from its main thread.
+#[cfg(target_os = "linux")]
+fn die_with_this_process(command: &mut Command) {
+    use rustix::process::{getpid, getppid, set_parent_process_death_signal};
+    let parent = getpid();
+    // SAFETY: the closure runs in the forked child before exec; it only makes two
+    // system calls (prctl, getppid), allocates nothing and takes no lock.
+    unsafe {
+        command.pre_exec(move || {
+            set_parent_process_death_signal(Some(Signal::TERM))?;
+            // If collide died between fork and prctl the signal will never come.
+            if getppid() != Some(parent) {
+                return Err(std::io::Error::other("collide ended while starting a run"));
+            }
+            Ok(())
+        });
+    }
+}
+
+/// Elsewhere a hard kill of collide may leave its running child behind.
+#[cfg(not(target_os = "linux"))]
+fn die_with_this_process(_: &mut Command) {}
 
 fn read_in_background(pipe: Option<impl Read + Send + 'static>) -> thread::JoinHandle<String> {
     thread::spawn(move || {

@@ -58,8 +58,12 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     // no successful row had a collapse) and did not record the event method's TC time.
     (5, "collapse_time", Fill::F64(f64::NAN)),
     (5, "tc", Fill::F64(f64::NAN)),
-    // Version 5 did not measure how far disks went into the walls.
+    // Version 5 did not measure how far disks went into the walls; it judged
+    // oversubscription by the machine's CPUs, not those the study could use, and did not
+    // record them.
     (6, "max_wall_penetration", Fill::F64(f64::NAN)),
+    (6, "usable_cpus", Fill::NullU64),
+    (6, "cpu_affinity", Fill::Str("")),
 ];
 
 /// What became of one run.
@@ -150,6 +154,11 @@ pub struct Record {
     pub cpu_model: String,
     pub logical_cores: u64,
     pub physical_cores: u64,
+    /// The CPUs the study could run on (affinity mask and quota); `oversubscribed` means
+    /// more workers than these. Null in files of schema version 5 and older.
+    pub usable_cpus: Option<u64>,
+    /// Those CPUs as the kernel lists them (e.g. `0-3`); "" in older files.
+    pub cpu_affinity: String,
     pub memory_bytes: u64,
     pub os: String,
     pub rustc: String,
@@ -314,11 +323,13 @@ impl Record {
             rms_step_over_radius: f64::NAN,
             choice: String::new(),
             temperature_curve: String::new(),
-            oversubscribed: threads * ranks > env.logical_cores as u64,
+            oversubscribed: threads * ranks > env.usable_cpus as u64,
             hostname: env.hostname.clone(),
             cpu_model: env.cpu_model.clone(),
             logical_cores: env.logical_cores as u64,
             physical_cores: env.physical_cores as u64,
+            usable_cpus: Some(env.usable_cpus as u64),
+            cpu_affinity: env.cpu_affinity.clone(),
             memory_bytes: env.memory_bytes,
             os: env.os.clone(),
             rustc: env.rustc.clone(),
@@ -417,7 +428,7 @@ macro_rules! for_each_column {
             str: study, manifest_hash, build_id, config_key, scene, scaling, status, error, backend,
                  boundary, broadphase, state_hash, hostname, cpu_model, os, rustc, profile,
                  features, git_commit, mpi_library, study_started_utc, finished_utc, method,
-                 observe, choice, temperature_curve;
+                 observe, choice, temperature_curve, cpu_affinity;
             u64: threads, ranks, workers, n, steps, pair_collisions, wall_collisions,
                  logical_cores, physical_cores, memory_bytes;
             u32: repetition;
@@ -430,7 +441,7 @@ macro_rules! for_each_column {
                  pressure, compressibility_z, missed_collision_fraction, mean_overlap,
                  energy_relative_error, rms_step_over_radius, collapse_time, tc;
             bool: oversubscribed, git_dirty;
-            opt_u64: seed, missed_collisions, collapse_guard_fired
+            opt_u64: seed, missed_collisions, collapse_guard_fired, usable_cpus
         )
     };
 }
@@ -459,12 +470,13 @@ pub fn to_frame(records: &[Record]) -> PolarsResult<DataFrame> {
 /// Rebuilds records from a table written by [`to_frame`]; names the first missing or
 /// mistyped column otherwise.
 pub fn from_frame(frame: &DataFrame) -> anyhow::Result<Vec<Record>> {
-    let version = frame
+    let versions = frame
         .column("schema_version")
         .context("no `schema_version` column: not a collide results file")?
         .u32()
-        .context("`schema_version` is not an unsigned integer: not a collide results file")?
-        .get(0);
+        .context("`schema_version` is not an unsigned integer: not a collide results file")?;
+    // A table without rows has no version to read (polars' `get(0)` and `first()` panic).
+    let version = versions.iter().next().flatten();
     let upgraded;
     let frame = match version {
         Some(version) if version > SCHEMA_VERSION => bail!(
@@ -490,12 +502,12 @@ pub fn from_frame(frame: &DataFrame) -> anyhow::Result<Vec<Record>> {
     macro_rules! read {
         (str: $($s:ident),*; u64: $($u:ident),*; u32: $($r:ident),*; f64: $($f:ident),*;
          bool: $($b:ident),*; opt_u64: $($o:ident),*) => {{
-            $(let $s = column(stringify!($s))?.str()?;)*
-            $(let $u = column(stringify!($u))?.u64()?;)*
-            $(let $r = column(stringify!($r))?.u32()?;)*
-            $(let $f = column(stringify!($f))?.f64()?;)*
-            $(let $b = column(stringify!($b))?.bool()?;)*
-            $(let $o = column(stringify!($o))?.u64()?;)*
+            $(let $s = column(stringify!($s))?.str().with_context(|| mistyped(stringify!($s), "text"))?;)*
+            $(let $u = column(stringify!($u))?.u64().with_context(|| mistyped(stringify!($u), "a count (u64)"))?;)*
+            $(let $r = column(stringify!($r))?.u32().with_context(|| mistyped(stringify!($r), "a count (u32)"))?;)*
+            $(let $f = column(stringify!($f))?.f64().with_context(|| mistyped(stringify!($f), "a number (f64)"))?;)*
+            $(let $b = column(stringify!($b))?.bool().with_context(|| mistyped(stringify!($b), "true/false"))?;)*
+            $(let $o = column(stringify!($o))?.u64().with_context(|| mistyped(stringify!($o), "a count (u64)"))?;)*
             (0..rows)
                 .map(|i| Record {
                     $($s: $s.get(i).unwrap_or_default().to_owned(),)*
@@ -509,6 +521,13 @@ pub fn from_frame(frame: &DataFrame) -> anyhow::Result<Vec<Record>> {
         }};
     }
     Ok(for_each_column!(read))
+}
+
+/// The message for a column of the wrong type.
+fn mistyped(name: &str, expected: &str) -> String {
+    format!(
+        "column `{name}` does not hold {expected}: not a collide results file, or a damaged one"
+    )
 }
 
 /// A table of an older schema version with the columns added since then, each filled
@@ -531,13 +550,14 @@ fn upgrade(frame: &DataFrame, version: u32) -> anyhow::Result<DataFrame> {
 /// Writes the records to `path` atomically (Parquet, zstd).
 pub fn write(path: &Path, records: &[Record]) -> anyhow::Result<()> {
     let mut frame = to_frame(records)?;
-    write_atomically(path, |out| {
-        ParquetWriter::new(out)
-            .with_compression(ParquetCompression::Zstd(None))
-            .finish(&mut frame)
-            .map(|_| ())
-            .map_err(std::io::Error::other)
-    })
+    // Encoded in memory first (result tables are small), so that a failing disk's own
+    // error reaches the message rather than the encoder's "transport error".
+    let mut bytes = Vec::new();
+    ParquetWriter::new(&mut bytes)
+        .with_compression(ParquetCompression::Zstd(None))
+        .finish(&mut frame)
+        .context("cannot encode the records as Parquet")?;
+    write_atomically(path, |out| out.write_all(&bytes))
 }
 
 /// The `.parquet` files in `dir`, sorted by name (oldest first: names start with the
@@ -552,13 +572,46 @@ pub fn files_in(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-/// Reads the records of one results file, saying which file and why if it cannot.
+/// Reads the records of one results file, saying which file and why if it cannot. A
+/// file without rows (a study stopped before its first run ended) reads as no records.
 pub fn read(path: &Path) -> anyhow::Result<Vec<Record>> {
     let file = File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
-    let frame = ParquetReader::new(file)
-        .finish()
-        .with_context(|| format!("{} is not a readable Parquet file", path.display()))?;
+    let bytes = file
+        .metadata()
+        .with_context(|| format!("cannot read {}", path.display()))?
+        .len();
+    if bytes == 0 {
+        bail!(
+            "{} is empty (0 bytes), not a results file; delete it (a study that was \
+             stopped while writing may leave one)",
+            path.display()
+        );
+    }
+    let frame = ParquetReader::new(file).finish().with_context(|| {
+        format!(
+            "{} is not a readable Parquet file (truncated, damaged, or another format)",
+            path.display()
+        )
+    })?;
     from_frame(&frame).with_context(|| format!("{}", path.display()))
+}
+
+/// A serial run's context for unit tests: one worker, repetition 0, placeholder names.
+#[cfg(test)]
+pub(crate) fn serial_context(environment: &Environment) -> RecordContext<'_> {
+    RecordContext {
+        study: "s",
+        manifest_hash: "m",
+        build_id: "b",
+        config_key: "k",
+        scene: "gas",
+        scaling: "strong",
+        backend: "serial",
+        workers: 1,
+        repetition: 0,
+        environment,
+        study_started_utc: "2026-11-22T18:00:00Z",
+    }
 }
 
 #[cfg(test)]

@@ -4,11 +4,9 @@
 use std::path::Path;
 
 use anyhow::anyhow;
-use plotters::coord::Shift;
-use plotters::drawing::DrawingAreaErrorKind;
 use plotters::prelude::*;
-use plotters_backend::DrawingErrorKind;
-use plotters_bitmap::BitMapBackendError;
+
+use crate::output::{Canvas, write_gif, write_png};
 
 use crate::sim::engine::Engine;
 use crate::sim::{Boundary, Particles, Scene};
@@ -19,6 +17,8 @@ use crate::view::raster::speed_rgb;
 const LONG_SIDE_PX: f64 = 800.0;
 /// Pixels of margin around the box.
 const MARGIN_PX: f64 = 10.0;
+/// Hundredths of a second between the frames of a GIF.
+const FRAME_DELAY_CS: u16 = 6;
 
 /// Where a box of `width` × `height` lands on the picture, and the picture's size.
 #[derive(Clone, Copy, Debug)]
@@ -59,7 +59,7 @@ fn speed_colour(speed: f64, fast: f64) -> RGBColor {
 }
 
 fn draw_state(
-    area: &DrawingArea<BitMapBackend<'_>, Shift>,
+    area: &Canvas<'_>,
     scene: &Scene,
     particles: &Particles,
     fast: f64,
@@ -103,55 +103,31 @@ pub fn png_after_run(prepared: &PreparedRun, path: &Path) -> anyhow::Result<()> 
     for _ in 0..prepared.steps {
         engine.step(&mut particles);
     }
-    let area = BitMapBackend::new(path, Frame::of(scene).size).into_drawing_area();
-    draw_state(&area, scene, &particles, fast)?;
-    area.present().map_err(|e| picture_error(path, e))
-}
-
-/// Why a picture could not be written to `path`, in words (plotters' own text of its
-/// bitmap errors is a debug dump).
-pub fn picture_error(path: &Path, err: DrawingAreaErrorKind<BitMapBackendError>) -> anyhow::Error {
-    let reason = match &err {
-        DrawingAreaErrorKind::BackendError(DrawingErrorKind::DrawingError(backend)) => {
-            match backend {
-                BitMapBackendError::IOError(io) => crate::output::io_reason(io),
-                // An image error's text is its I/O error's, when it is one.
-                BitMapBackendError::ImageError(image) => {
-                    crate::output::without_os_code(image.to_string())
-                }
-                BitMapBackendError::GifEncodingError(gif) => gif.to_string(),
-                BitMapBackendError::InvalidBuffer => "the picture buffer is invalid".to_owned(),
-            }
-        }
-        other => other.to_string(),
-    };
-    anyhow!("cannot write {}: {reason}", path.display())
+    write_png(path, Frame::of(scene).size, |area| {
+        draw_state(area, scene, &particles, fast)
+    })
 }
 
 /// Writes an animated GIF of the run: `frames` pictures from the start to the last step.
 pub fn gif_of_run(prepared: &PreparedRun, path: &Path, frames: u32) -> anyhow::Result<()> {
     let scene = &prepared.scene;
     let fast = fast_speed(&scene.particles);
-    let area = BitMapBackend::gif(path, Frame::of(scene).size, 60)
-        .map_err(|e| {
-            picture_error(
-                path,
-                DrawingAreaErrorKind::BackendError(DrawingErrorKind::DrawingError(e)),
-            )
-        })?
-        .into_drawing_area();
     let mut particles = scene.particles.clone();
     let mut engine = Engine::new(scene, prepared.method, prepared.params, prepared.event);
     let mut done = 0;
-    for frame in 0..frames {
-        // Frame k shows the state after round(k·steps/(frames − 1)) steps.
-        let target = (u64::from(frame) * prepared.steps).div_ceil(u64::from(frames - 1).max(1));
-        while done < target.min(prepared.steps) {
-            engine.step(&mut particles);
-            done += 1;
-        }
-        draw_state(&area, scene, &particles, fast)?;
-        area.present().map_err(|e| picture_error(path, e))?;
-    }
-    Ok(())
+    write_gif(
+        path,
+        Frame::of(scene).size,
+        frames,
+        FRAME_DELAY_CS,
+        |frame, area| {
+            // Frame k shows the state after round(k·steps/(frames − 1)) steps.
+            let target = (u64::from(frame) * prepared.steps).div_ceil(u64::from(frames - 1).max(1));
+            while done < target.min(prepared.steps) {
+                engine.step(&mut particles);
+                done += 1;
+            }
+            draw_state(area, scene, &particles, fast)
+        },
+    )
 }

@@ -101,9 +101,13 @@ fn environment(out: &mut String, first: &Record, records: &[Record]) {
     };
     let _ = writeln!(out, "## Environment\n");
     let _ = writeln!(out, "| | |\n| --- | --- |");
+    let usable = match usable_cpus(first) {
+        cpus if cpus == first.logical_cores => String::new(),
+        cpus => format!("; the study could use {cpus}: {}", first.cpu_affinity),
+    };
     let _ = writeln!(
         out,
-        "| CPU | {} ({} logical, {} physical cores) |",
+        "| CPU | {} ({} logical, {} physical cores{usable}) |",
         first.cpu_model, first.logical_cores, first.physical_cores
     );
     let _ = writeln!(
@@ -152,9 +156,9 @@ fn warnings(out: &mut String, records: &[Record], setups: &[Setup]) {
     if !oversubscribed.is_empty() {
         let _ = writeln!(
             out,
-            "> **Warning: oversubscribed.** More workers than the {} logical cores: {}. Their \
-             times measure contention, not scaling.\n",
-            records[0].logical_cores,
+            "> **Warning: oversubscribed.** More workers than the {} CPUs the study could use: \
+             {}. Their times measure contention, not scaling.\n",
+            usable_cpus(&records[0]),
             oversubscribed.join(", ")
         );
     }
@@ -176,6 +180,12 @@ fn warnings(out: &mut String, records: &[Record], setups: &[Setup]) {
             "> **Warning: {failed} run(s) failed or timed out**; they are left out of every figure below.\n"
         );
     }
+}
+
+/// The CPUs a study could run on; the machine's logical cores in files that did not
+/// record them.
+fn usable_cpus(record: &Record) -> u64 {
+    record.usable_cpus.unwrap_or(record.logical_cores)
 }
 
 /// The highest 1-minute load average recorded after a run (NaN if none was).

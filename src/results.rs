@@ -7,29 +7,65 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::bail;
+use anyhow::{Context, bail};
 
 use crate::analysis::{self, Setup};
 use crate::manifest::Scaling;
 use crate::records::{self, Record, STATUS_OK};
 use crate::report::describe;
 
-/// Every record under `path` (a results file, or a study folder of them).
+/// Every record under `path`: a results file, or a study folder of them. In a folder, a
+/// file that cannot be read, or holds no runs, is skipped with a warning that names it
+/// and says why; a file named on its own must be readable. A folder whose subfolders
+/// are studies is refused with their list ([`study_folders`]).
 pub fn load(path: &Path) -> anyhow::Result<Vec<Record>> {
-    let files: Vec<PathBuf> = if path.is_dir() {
-        records::files_in(path)?
-    } else {
-        vec![path.to_owned()]
-    };
+    if !path.is_dir() {
+        let records = records::read(path)?;
+        if records.is_empty() {
+            bail!(
+                "{} holds no runs: the study stopped before its first run ended",
+                path.display()
+            );
+        }
+        return Ok(records);
+    }
+    let files = records::files_in(path)?;
     if files.is_empty() {
+        let studies = study_folders(path)?;
+        if studies.is_empty() {
+            bail!(
+                "no .parquet results in {}; run a study first (`collide run experiments/NAME.toml`)",
+                path.display()
+            );
+        }
         bail!(
-            "no .parquet results in {}; run a study first (`collide run experiments/NAME.toml`)",
-            path.display()
+            "{} holds no results files itself but {} study folder(s):\n{}name one of them",
+            path.display(),
+            studies.len(),
+            list_folders(&studies)
         );
     }
     let mut all = Vec::new();
+    let mut skipped = Vec::new();
     for file in files {
-        all.extend(records::read(&file)?);
+        match records::read(&file) {
+            Ok(rows) if rows.is_empty() => skipped.push(format!(
+                "{} holds no runs: its study stopped before its first run ended",
+                file.display()
+            )),
+            Ok(rows) => all.extend(rows),
+            Err(err) => skipped.push(format!("{err:#}")),
+        }
+    }
+    for reason in &skipped {
+        eprintln!("warning: skipped {reason}");
+    }
+    if all.is_empty() {
+        bail!(
+            "no readable runs in {}: every results file there was skipped (see the warnings); \
+             run the study again",
+            path.display()
+        );
     }
     Ok(all)
 }
@@ -106,6 +142,113 @@ pub fn scaling_table(setups: &[Setup]) -> String {
         );
     }
     out
+}
+
+/// A subfolder holding results files: a study's folder, as `collide run` writes them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StudyFolder {
+    pub path: PathBuf,
+    pub n_files: usize,
+}
+
+/// The subfolders of `dir` that hold `.parquet` files, by name.
+pub fn study_folders(dir: &Path) -> anyhow::Result<Vec<StudyFolder>> {
+    let mut folders = Vec::new();
+    let entries =
+        std::fs::read_dir(dir).with_context(|| format!("cannot list {}", dir.display()))?;
+    for path in entries.filter_map(|entry| entry.ok().map(|e| e.path())) {
+        if path.is_dir() {
+            let n_files = records::files_in(&path).map_or(0, |files| files.len());
+            if n_files > 0 {
+                folders.push(StudyFolder { path, n_files });
+            }
+        }
+    }
+    folders.sort_by(|a, b| a.path.cmp(&b.path));
+    Ok(folders)
+}
+
+/// One line per folder: `  PATH (N results files)`.
+pub fn list_folders(folders: &[StudyFolder]) -> String {
+    folders
+        .iter()
+        .map(|f| format!("  {} ({} results file(s))\n", f.path.display(), f.n_files))
+        .collect()
+}
+
+/// The records split by study, in first-seen order (a folder may hold files copied
+/// from several studies).
+pub fn by_study(records: Vec<Record>) -> Vec<(String, Vec<Record>)> {
+    let mut studies: Vec<(String, Vec<Record>)> = Vec::new();
+    for record in records {
+        match studies.iter_mut().find(|(name, _)| *name == record.study) {
+            Some((_, rows)) => rows.push(record),
+            None => studies.push((record.study.clone(), vec![record])),
+        }
+    }
+    studies
+}
+
+/// What `collide results PATH` prints: the table of each study under `path` (a results
+/// file, a study folder, a folder of files copied from several studies, or a folder of
+/// study folders), each headed by its name when there is more than one.
+pub fn show(path: &Path) -> anyhow::Result<String> {
+    let folders = match path.is_dir() && records::files_in(path)?.is_empty() {
+        true => study_folders(path)?,
+        false => Vec::new(),
+    };
+    let mut studies = Vec::new();
+    if folders.is_empty() {
+        studies = by_study(load(path)?);
+    }
+    for folder in &folders {
+        match load(&folder.path) {
+            Ok(rows) => studies.extend(by_study(rows)),
+            Err(err) => eprintln!("warning: skipped {}: {err:#}", folder.path.display()),
+        }
+    }
+    if studies.is_empty() {
+        bail!(
+            "no readable runs in the study folders of {}",
+            path.display()
+        );
+    }
+    let mut out = String::new();
+    if studies.len() > 1 {
+        let names: Vec<&str> = studies.iter().map(|(name, _)| name.as_str()).collect();
+        let _ = writeln!(
+            out,
+            "{} studies in {}: {}",
+            studies.len(),
+            path.display(),
+            names.join(", ")
+        );
+    }
+    for (name, rows) in &studies {
+        if studies.len() > 1 {
+            let _ = writeln!(out, "\nstudy {name}:");
+        }
+        out.push_str(&summary(rows)?);
+    }
+    Ok(out)
+}
+
+/// The one study `records` belong to; refuses records of several studies, naming them,
+/// since one report or comparison covers one study.
+pub fn one_study<'a>(records: &'a [Record], path: &Path) -> anyhow::Result<&'a str> {
+    let mut names: Vec<&str> = records.iter().map(|r| r.study.as_str()).collect();
+    names.sort_unstable();
+    names.dedup();
+    match names.as_slice() {
+        [one] => Ok(one),
+        _ => bail!(
+            "{} holds the runs of {} studies ({}); a report covers one study: keep each \
+             study's files in its own folder (as `collide run` writes them) and report that folder",
+            path.display(),
+            names.len(),
+            names.join(", ")
+        ),
+    }
 }
 
 /// Median of a non-empty slice.

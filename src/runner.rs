@@ -11,6 +11,7 @@ use std::fs::{File, TryLockError};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::time::Duration;
 
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -123,13 +124,14 @@ pub fn run_study(
 
     for configuration in &configurations {
         if configuration.backend != BackendName::Serial
-            && configuration.workers > environment.logical_cores
+            && configuration.workers > environment.usable_cpus
         {
             note(&format!(
-                "note: {} is oversubscribed ({} workers on {} logical cores); its rows say so",
+                "note: {} is oversubscribed ({} workers on the {} CPUs this study may use); \
+                 its rows say so",
                 configuration.key(),
                 configuration.workers,
-                environment.logical_cores
+                environment.usable_cpus
             ));
         }
     }
@@ -220,34 +222,7 @@ pub fn run_study(
             environment: &environment,
             study_started_utc: &started_utc,
         };
-        let record = match run(configuration, &scene_files[c]) {
-            Err(e) => Record::failed(
-                &context,
-                STATUS_FAILED,
-                format!("cannot start collide: {e}"),
-            ),
-            Ok(Ended::TimedOut { stderr }) => Record::failed(
-                &context,
-                STATUS_TIMED_OUT,
-                format!(
-                    "killed after {} s{}",
-                    study.timeout.as_secs_f64(),
-                    tail("its output", &stderr)
-                ),
-            ),
-            Ok(Ended::Exited {
-                status,
-                stdout,
-                stderr,
-            }) => match RunSummary::from_last_line(&stdout) {
-                Ok(summary) if status.success() => Record::measured(&context, &summary),
-                _ => Record::failed(
-                    &context,
-                    STATUS_FAILED,
-                    format!("{status}{}", tail("its output", &stderr)),
-                ),
-            },
-        };
+        let record = record_of(&context, run(configuration, &scene_files[c]), study.timeout);
         if record.status == STATUS_OK {
             measured += 1;
         } else {
@@ -277,6 +252,48 @@ pub fn run_study(
         kept,
         calibrations,
     })
+}
+
+/// The row of one run from how its process ended: measured if it exited 0 with a
+/// summary on its last line; failed otherwise, keeping why and the end of its output.
+fn record_of(
+    context: &RecordContext<'_>,
+    ended: std::io::Result<Ended>,
+    timeout: Duration,
+) -> Record {
+    match ended {
+        Err(e) => Record::failed(context, STATUS_FAILED, format!("cannot start collide: {e}")),
+        Ok(Ended::TimedOut { stderr }) => Record::failed(
+            context,
+            STATUS_TIMED_OUT,
+            format!(
+                "killed after {} s{}",
+                timeout.as_secs_f64(),
+                tail("its output", &stderr)
+            ),
+        ),
+        Ok(Ended::Exited {
+            status,
+            stdout,
+            stderr,
+        }) => match (status.success(), RunSummary::from_last_line(&stdout)) {
+            (true, Ok(summary)) => Record::measured(context, &summary),
+            (true, Err(e)) => Record::failed(
+                context,
+                STATUS_FAILED,
+                format!(
+                    "it exited 0 but printed no summary on its last line ({e}){}{}",
+                    tail("its output", &stdout),
+                    tail("its error output", &stderr)
+                ),
+            ),
+            (false, _) => Record::failed(
+                context,
+                STATUS_FAILED,
+                format!("{status}{}", tail("its output", &stderr)),
+            ),
+        },
+    }
 }
 
 /// What `collide calibrate` prints: one JSON object, the times of
@@ -407,7 +424,8 @@ fn new_results_path(dir: &Path, environment: &Environment) -> PathBuf {
         .expect("a free name among unboundedly many")
 }
 
-/// The results file in `dir` last written by the same manifest and build, with its rows.
+/// The results file in `dir` last written by the same manifest and build, with its rows;
+/// files that cannot be read are passed over with a warning naming them.
 fn resumable(
     dir: &Path,
     manifest_hash: &str,
@@ -418,7 +436,13 @@ fn resumable(
     let modified = |path: &PathBuf| std::fs::metadata(path).and_then(|m| m.modified()).ok();
     files.sort_by(|a, b| modified(b).cmp(&modified(a)).then_with(|| b.cmp(a)));
     for path in files {
-        let rows = records::read(&path)?;
+        let rows = match records::read(&path) {
+            Ok(rows) => rows,
+            Err(err) => {
+                eprintln!("warning: not resuming from {}: {err:#}", path.display());
+                continue;
+            }
+        };
         if rows
             .first()
             .is_some_and(|r| r.manifest_hash == manifest_hash && r.build_id == build_id)
@@ -449,4 +473,35 @@ pub fn materialize_scenes(
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::ExitStatus;
+
+    use super::*;
+
+    #[test]
+    fn a_run_that_exits_0_without_a_summary_keeps_the_reason_and_what_it_printed() {
+        let environment = Environment::capture();
+        let context = records::serial_context(&environment);
+        let ended = |code: i32, stdout: &str| Ended::Exited {
+            status: ExitStatus::from_raw(code << 8),
+            stdout: stdout.to_owned(),
+            stderr: "a warning\n".to_owned(),
+        };
+        let timeout = Duration::from_secs(1);
+        let quiet = record_of(&context, Ok(ended(0, "step 10\nall done\n")), timeout);
+        assert_eq!(quiet.status, STATUS_FAILED);
+        for fragment in ["exited 0", "no summary", "all done", "a warning"] {
+            assert!(
+                quiet.error.contains(fragment),
+                "{fragment}: {}",
+                quiet.error
+            );
+        }
+        let failed = record_of(&context, Ok(ended(3, "")), timeout);
+        assert!(failed.error.contains("exit status: 3") && failed.error.contains("a warning"));
+    }
 }

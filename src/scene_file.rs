@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
+use crate::scene_limits::{self, Field};
 use crate::sim::grid::StripGrid;
 use crate::sim::scene::{
     Extent, GasSpec, MassRule, Placement, RSA_JAMMING_PACKING, RadiusDistribution,
@@ -94,6 +95,7 @@ pub fn parse(path: &Path, text: &str, overrides: &Overrides) -> Result<RunSpec, 
         SceneSource::Gas(validator.gas(&raw.scene, overrides)?)
     };
     validator.method_fits_scene(&raw, &method, &scene)?;
+    validator.derived_quantities(&raw, overrides, &method, &scene)?;
     Ok(RunSpec {
         scene,
         method,
@@ -362,6 +364,40 @@ impl Validator<'_> {
             ));
         }
         Ok(())
+    }
+
+    /// The derived quantities of [`scene_limits::check`], each traced to the field to change.
+    fn derived_quantities(
+        &self,
+        raw: &RawFile,
+        overrides: &Overrides,
+        method: &MethodSpec,
+        scene: &SceneSource,
+    ) -> Result<(), SceneFileError> {
+        let Some(violation) = scene_limits::check(scene, method) else {
+            return Ok(());
+        };
+        let scene_raw = &raw.scene;
+        let (field, origin) = match violation.field {
+            Field::Radius => ("scene.radius", self.origin_of(&scene_raw.radius)),
+            Field::Size => ("scene.size", self.origin_of(&scene_raw.size)),
+            Field::SpeedRms => ("scene.speed_rms", self.origin_of(&scene_raw.speed_rms)),
+            Field::Mass => ("scene.mass", self.origin_of(&scene_raw.mass)),
+            Field::Gravity => ("scene.gravity", self.origin_of(&scene_raw.gravity)),
+            Field::Particles => ("scene.particle", Origin::Default),
+            Field::Dt => match overrides.dt {
+                Some(_) => ("method.dt", Origin::Flag("--dt")),
+                None => ("method.dt", self.origin_of(&raw.method.dt)),
+            },
+        };
+        Err(self.invalid(origin, field, violation.problem, violation.fix))
+    }
+
+    /// Where a field was written, if it was.
+    fn origin_of<T>(&self, value: &Option<Spanned<T>>) -> Origin {
+        value
+            .as_ref()
+            .map_or(Origin::Default, |spanned| self.origin(spanned.span()))
     }
 
     fn physics(&self, raw: &RawScene) -> Result<Physics, SceneFileError> {

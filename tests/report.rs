@@ -13,6 +13,8 @@ fn environment() -> Environment {
         cpu_model: "Test CPU @ 2.0GHz".into(),
         logical_cores: 2,
         physical_cores: 2,
+        usable_cpus: 2,
+        cpu_affinity: "0-1".into(),
         memory_bytes: 8 << 30,
         os: "Test OS, Linux 6.0".into(),
         rustc: "rustc 1.95.0".into(),

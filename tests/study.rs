@@ -14,7 +14,7 @@ use crate::cli::{collide, json_summary, scene_file};
 const SCENE: &str = "[scene]\nn = 200\npacking = 0.1\nseed = 3\n[method]\ndt = 0.1\nsteps = 20\n";
 
 /// A manifest over `scene.toml` (written beside it) with the given extra text.
-fn manifest(dir: &Path, body: &str) -> String {
+pub fn manifest(dir: &Path, body: &str) -> String {
     scene_file(dir, "scene.toml", SCENE);
     let text = format!("name = \"tiny\"\n{body}\n[[scenes]]\nfile = \"scene.toml\"\n");
     scene_file(dir, "tiny.toml", &text)
@@ -323,7 +323,7 @@ fn a_study_of_mpi_configurations_only_is_an_error_without_mpi() {
     );
 }
 
-fn sample_records() -> Vec<Record> {
+pub fn sample_records() -> Vec<Record> {
     let environment = Environment::capture();
     let context = RecordContext {
         study: "s",
@@ -399,7 +399,7 @@ fn corrupt_foreign_and_old_results_are_refused_with_the_reason() {
 }
 
 /// Processes whose command line mentions `needle`.
-fn processes_mentioning(needle: &str) -> Vec<String> {
+pub fn processes_mentioning(needle: &str) -> Vec<String> {
     std::fs::read_dir("/proc")
         .unwrap()
         .filter_map(|entry| std::fs::read(entry.ok()?.path().join("cmdline")).ok())

@@ -5,6 +5,8 @@ mod auto;
 mod backends;
 mod check;
 mod cli;
+mod faults;
+mod limits;
 #[cfg(feature = "mpi")]
 mod mpi;
 mod physics;

@@ -6,7 +6,7 @@ use std::ffi::OsString;
 use std::process::Command;
 use std::time::Duration;
 
-use crate::backend::{BackendError, machine_cores};
+use crate::backend::{BackendError, USABLE_CPUS_ENV, usable_cpus};
 use crate::process::{Ended, run_with_timeout, stop_children_on_interrupt, tail};
 use crate::summary::RunSummary;
 
@@ -43,10 +43,13 @@ pub fn launch(launch: &Launch, args: &[OsString]) -> Result<RunSummary, BackendE
             .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
             .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1");
     }
-    if launch.ranks > machine_cores() {
-        // More ranks than cores: allowed (and flagged in the summary), not refused.
+    let cpus = usable_cpus();
+    if launch.ranks > cpus {
+        // More ranks than CPUs: allowed (and flagged in the summary), not refused.
         command.env("OMPI_MCA_rmaps_base_oversubscribe", "1");
     }
+    // Rank 0 judges oversubscription by the CPUs this launch may use, not its own.
+    command.env(USABLE_CPUS_ENV, cpus.to_string());
     // Ctrl-C (or a study's timeout, which interrupts this process) stops the ranks too.
     stop_children_on_interrupt();
     let ended = run_with_timeout(command, launch.timeout).map_err(|e| {

@@ -202,6 +202,22 @@ pub fn machine_cores() -> usize {
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, NonZeroUsize::get))
 }
 
+/// Names the variable through which an MPI launch passes its [`usable_cpus`] to the
+/// ranks it starts (each may be bound to a single core).
+pub const USABLE_CPUS_ENV: &str = "COLLIDE_USABLE_CPUS";
+
+/// The CPUs this process may run on: its affinity mask and CPU quota (`taskset`, a
+/// batch scheduler's cpuset, a container's limit), as the standard library counts them.
+/// Worker defaults and the oversubscription verdict follow it. An MPI rank takes the
+/// count of the process that launched the ranks, from [`USABLE_CPUS_ENV`].
+pub fn usable_cpus() -> usize {
+    std::env::var(USABLE_CPUS_ENV)
+        .ok()
+        .and_then(|count| count.parse().ok())
+        .filter(|&count| count > 0)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, NonZeroUsize::get))
+}
+
 /// Counts the CPUs in a kernel CPU list such as `0-3,8,10-11`.
 fn count_cpu_list(list: &str) -> Option<usize> {
     let mut count = 0;
@@ -277,7 +293,7 @@ pub fn summarize(
     };
     let wall_s = measured.wall_s;
     let final_observables = observe(last);
-    let cores = machine_cores();
+    let cores = usable_cpus();
     let counters = &measured.counters;
     let scene = &prepared.scene;
     let physics = &scene.physics;
