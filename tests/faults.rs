@@ -144,6 +144,7 @@ fn resume_passes_over_damaged_files_and_check_refuses_a_damaged_baseline() {
             &[
                 &[
                     "run",
+                    "--no-report",
                     path.as_str(),
                     "--quiet",
                     "--out",
@@ -222,7 +223,14 @@ fn a_hard_kill_of_collide_run_takes_its_measurement_child_with_it() {
         "repetitions = 1\nwarmups = 0\n[sweep]\nsteps = [10000000]\n[backends]\nserial = true\n",
     );
     let mut study = Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args(["run", &path, "--quiet", "--out", out.to_str().unwrap()])
+        .args([
+            "run",
+            &path,
+            "--no-report",
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+        ])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -278,7 +286,7 @@ fn a_study_run_from_another_repository_records_the_commit_collide_was_built_from
         .unwrap_or_default();
     let output = Command::new(env!("CARGO_BIN_EXE_collide"))
         .current_dir(dir.path())
-        .args(["run", &path, "--quiet", "--out", "results"])
+        .args(["run", &path, "--no-report", "--quiet", "--out", "results"])
         .output()
         .unwrap();
     assert!(output.status.success(), "{}", text(&output.stderr));
@@ -368,7 +376,14 @@ fn each_exit_code_of_the_table_is_the_one_stated_in_help() {
     let out = dir.path().join("results");
     let run = |body: &str| {
         let path = manifest(dir.path(), body);
-        collide(&["run", &path, "--quiet", "--out", out.to_str().unwrap()])
+        collide(&[
+            "run",
+            &path,
+            "--no-report",
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+        ])
     };
     let measured = run("repetitions = 1\nwarmups = 0\n[backends]\nserial = true\n");
     assert_eq!(
@@ -409,6 +424,7 @@ fn blank_scene_names_are_refused_before_anything_is_written() {
         );
         let output = collide(&[
             "run",
+            "--no-report",
             path.to_str().unwrap(),
             "--out",
             out.to_str().unwrap(),
@@ -511,6 +527,7 @@ fn on_a_full_disk_every_output_fails_in_words_and_leaves_no_partial_file() {
         ],
         vec![
             "run".into(),
+            "--no-report".into(),
             study,
             "--quiet".into(),
             "--out".into(),
@@ -590,7 +607,14 @@ fn under_taskset_workers_default_to_the_allowed_cpus_and_more_are_oversubscribed
         dir.path(),
         "repetitions = 1\nwarmups = 0\n[backends]\nrayon = [2]\n",
     );
-    taskset(&["run", &path, "--quiet", "--out", out.to_str().unwrap()]);
+    taskset(&[
+        "run",
+        &path,
+        "--no-report",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     let row = rows_of(&out).remove(0);
     assert_eq!((row.usable_cpus, row.cpu_affinity.as_str()), (Some(1), "0"));
     assert!(row.oversubscribed);

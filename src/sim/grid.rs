@@ -503,22 +503,7 @@ impl StripGrid {
                 // Own strip: the disks to the right within reach.
                 let right = |b: &Entry| b.x - a.x < reach;
                 let own = &own_entries[pos + 1..];
-                let rest = match own.split_first_chunk::<OWN_WINDOW>() {
-                    Some((window, rest)) => {
-                        for b in window {
-                            sink.offer(right(b) & within(a, b), a, b);
-                        }
-                        if right(&window[OWN_WINDOW - 1]) {
-                            rest
-                        } else {
-                            no_entries
-                        }
-                    }
-                    None => own,
-                };
-                for b in rest.iter().take_while(|b| right(b)) {
-                    sink.offer(within(a, b), a, b);
-                }
+                offer_window::<OWN_WINDOW>(own, a, right, &within, sink);
                 // North strip: the disks within reach on either side.
                 while north_first < north_entries.len()
                     && north_entries[north_first].x <= a.x - reach
@@ -527,22 +512,7 @@ impl StripGrid {
                 }
                 let left = |b: &Entry| b.x < a.x + reach;
                 let north = &north_entries[north_first..];
-                let rest = match north.split_first_chunk::<NORTH_WINDOW>() {
-                    Some((window, rest)) => {
-                        for b in window {
-                            sink.offer(left(b) & within(a, b), a, b);
-                        }
-                        if left(&window[NORTH_WINDOW - 1]) {
-                            rest
-                        } else {
-                            no_entries
-                        }
-                    }
-                    None => north,
-                };
-                for b in rest.iter().take_while(|b| left(b)) {
-                    sink.offer(within(a, b), a, b);
-                }
+                offer_window::<NORTH_WINDOW>(north, a, left, &within, sink);
                 if PERIODIC {
                     // The same windows seen through the periodic image in x.
                     if a.x + reach > width {
@@ -578,6 +548,33 @@ impl StripGrid {
 const OWN_WINDOW: usize = 2;
 /// Candidates of the strip above tested without a loop exit ([`StripGrid::scan`]).
 const NORTH_WINDOW: usize = 4;
+
+/// Offers `sink` the pairs of `a` with the disks of one window of its scan: the
+/// `candidates` from the window's start on, in x order, while `inside` (the window ends
+/// where `inside` first fails). The first `K` are offered whatever their count, those
+/// outside failing the test rather than a loop exit; a loop continues only when the
+/// `K`-th is still inside.
+#[inline(always)]
+fn offer_window<const K: usize>(
+    candidates: &[Entry],
+    a: &Entry,
+    inside: impl Fn(&Entry) -> bool,
+    within: &impl Fn(&Entry, &Entry) -> bool,
+    sink: &mut impl Sink,
+) {
+    let rest = match candidates.split_first_chunk::<K>() {
+        Some((window, rest)) => {
+            for b in window {
+                sink.offer(inside(b) & within(a, b), a, b);
+            }
+            if inside(&window[K - 1]) { rest } else { &[] }
+        }
+        None => candidates,
+    };
+    for b in rest.iter().take_while(|b| inside(b)) {
+        sink.offer(within(a, b), a, b);
+    }
+}
 
 /// Where the scan's candidate pairs go: `offer` is called for every candidate, with
 /// whether it passed the test.
