@@ -52,19 +52,22 @@ pub struct Measured {
 /// their rates compare even where the machine differs: the median of three runs within
 /// 40 minutes (this VM's speed drifted by up to 35% between them; the observation
 /// rates from the last, the first to time them with the state cold in the caches).
+/// The step method's rates are from one later run of
+/// `cargo bench --bench kernels -- 'step/' --warm-up-time 1 --measurement-time 3` on the
+/// same idle machine (2026-11-23), after the broad phase moved to neighbour lists.
 /// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [
-        measured(1e4, 0.05, 47.7e6, 0.947e6, 432e6),
-        measured(1e4, 0.3, 34.8e6, 1.49e6, 457e6),
+        measured(1e4, 0.05, 94.5e6, 0.947e6, 432e6),
+        measured(1e4, 0.3, 53.0e6, 1.49e6, 457e6),
     ],
     [
-        measured(1e5, 0.05, 40.0e6, 0.235e6, 68.0e6),
-        measured(1e5, 0.3, 25.5e6, 0.612e6, 90.6e6),
+        measured(1e5, 0.05, 76.9e6, 0.235e6, 68.0e6),
+        measured(1e5, 0.3, 39.7e6, 0.612e6, 90.6e6),
     ],
     [
-        measured(1e6, 0.05, 25.2e6, 0.190e6, 79.6e6),
-        measured(1e6, 0.3, 26.6e6, 0.456e6, 110e6),
+        measured(1e6, 0.05, 51.6e6, 0.190e6, 79.6e6),
+        measured(1e6, 0.3, 23.0e6, 0.456e6, 110e6),
     ],
 ];
 

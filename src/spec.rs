@@ -218,16 +218,19 @@ impl PreparedRun {
     }
 }
 
-// Memory and time a run needs, known before anything is allocated. Measured as the
-// slope of peak resident memory (`/usr/bin/time -v collide simulate
-// experiments/scenes/seed-1000.toml --packing 0.05 --steps 1 --n N`) between N = 250 000
-// (59.6 MB) and N = 1 000 000 (175.5 MB) on a 2-core x86-64 Linux machine, release build:
-// step method 158 B per disk (serial; 20 steps instead of 1: 179 B), 215 B (rayon, 2
-// threads), 245 B (rayon, 8 threads); event method 352 B (serial). The intercept is
-// about 21 MB. Re-measure when the state or its scratch memory changes size.
+// Memory and time a run needs, known before anything is allocated. The step method's
+// figure is peak resident memory over N at N = 10⁷ (`/usr/bin/time -v collide simulate
+// experiments/scenes/seed-1000.toml --n 10000000 --packing 0.3 --steps 10 --seed 42`) on
+// a 2-core x86-64 Linux machine, release build, with the neighbour-list broad phase
+// (2026-11-23): 126 B per disk serial, 140 B with rayon on 2 threads; each further
+// thread adds about 5 B (its band's union-find scratch). The event method's, from the
+// slope between N = 250 000 and 10⁶ (before the neighbour lists; its state did not
+// change): 352 B (serial). The intercept is about 21 MB. Re-measure when the state or
+// its scratch memory changes size.
 
-/// Peak resident bytes per disk of the step method, any backend (the largest measured).
-pub const STEP_BYTES_PER_DISK: u64 = 256;
+/// Peak resident bytes per disk of the step method, any backend (the largest measured,
+/// with room for 8 threads).
+pub const STEP_BYTES_PER_DISK: u64 = 176;
 /// Peak resident bytes per disk of the event method (its calendar of predicted events).
 pub const EVENT_BYTES_PER_DISK: u64 = 368;
 /// Peak resident bytes of a run before its disks: the program, its libraries, the pool.
