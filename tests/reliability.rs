@@ -262,7 +262,7 @@ fn runs_too_large_for_the_machine_are_refused_before_allocating() {
         memory_bytes: 8_000_000_000,
     };
     let ranks = format!(
-        "name = \"m\"\n[sweep]\nn = [10000000]\n[backends]\nmpi = [2, 4]\n{}",
+        "name = \"m\"\n[sweep]\nn = [20000000]\n[backends]\nmpi = [2, 4]\n{}",
         inline_scene("gas")
     );
     let err = collide::manifest::parse(Path::new("m.toml"), &ranks, &machine)
