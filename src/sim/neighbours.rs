@@ -79,7 +79,7 @@ impl Skin {
     }
 
     /// A skin `width` wide (finite, not negative).
-    pub fn with_width(width: f64) -> Skin {
+    fn with_width(width: f64) -> Skin {
         Skin {
             width,
             ..Skin::default()
@@ -88,13 +88,6 @@ impl Skin {
 
     pub fn width(&self) -> f64 {
         self.width
-    }
-
-    /// True when a list built at the recorded positions may miss an overlapping pair:
-    /// never built, built for other disks, or a disk moved half the skin since.
-    pub fn is_stale(&self, particles: &Particles, domain: &Domain) -> bool {
-        !self.is_built_for(particles)
-            || self.is_exceeded(self.largest_displacement_sq(0..particles.len(), particles, domain))
     }
 
     /// True when the recorded positions are of as many disks as `particles` holds.
@@ -228,15 +221,6 @@ impl PairList {
         grid.find_pairs_in(strips, domain, skin.width(), &mut self.pairs);
         self.n_particles = particles.len();
         self.equal_radii = grid.layout().has_equal_radii();
-    }
-
-    /// Candidate pairs held.
-    pub fn len(&self) -> usize {
-        self.pairs.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.pairs.is_empty()
     }
 
     /// Appends the listed pairs that overlap now, in list order, with the grid's test.
