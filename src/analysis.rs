@@ -82,6 +82,18 @@ pub struct Setup {
 }
 
 impl Setup {
+    /// The worker counts measured by any backend, ascending, each once.
+    pub fn worker_counts(&self) -> Vec<u64> {
+        let mut workers: Vec<u64> = self
+            .backends
+            .iter()
+            .flat_map(|b| b.points.iter().map(|p| p.workers))
+            .collect();
+        workers.sort_unstable();
+        workers.dedup();
+        workers
+    }
+
     /// Whether there is any scaling to show: more than one backend-and-workers point.
     pub fn scales(&self) -> bool {
         self.backends.iter().map(|b| b.points.len()).sum::<usize>() > 1

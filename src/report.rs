@@ -282,13 +282,7 @@ fn setup_section(out: &mut String, setup: &Setup) {
         );
     }
     // Cuadro 1: workers × seconds per backend.
-    let mut workers: Vec<u64> = setup
-        .backends
-        .iter()
-        .flat_map(|b| b.points.iter().map(|p| p.workers))
-        .collect();
-    workers.sort_unstable();
-    workers.dedup();
+    let workers = setup.worker_counts();
     let _ = writeln!(out, "### Seconds per run (the seed's Cuadro 1)\n");
     let _ = write!(out, "| workers |");
     for backend in &setup.backends {

@@ -82,13 +82,7 @@ pub fn scaling_table(setups: &[Setup]) -> String {
     let mut out = String::new();
     for setup in setups.iter().filter(|s| s.scales()) {
         let _ = writeln!(out, "\n{}", describe(setup));
-        let mut workers: Vec<u64> = setup
-            .backends
-            .iter()
-            .flat_map(|b| b.points.iter().map(|p| p.workers))
-            .collect();
-        workers.sort_unstable();
-        workers.dedup();
+        let workers = setup.worker_counts();
         let _ = write!(out, "{:>7}", "workers");
         for backend in &setup.backends {
             let _ = write!(

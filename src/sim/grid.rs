@@ -406,29 +406,32 @@ impl StripGrid {
             let inv_height = self.layout.inv_strip_height;
             let lowest = ((ya - reach) * inv_height).floor() as i64;
             let highest = ((ya + reach) * inv_height).floor() as i64;
-            let strips = if PERIODIC {
-                // Every strip once, even when the window wraps all the way round.
-                (lowest..=highest.min(lowest + n_strips - 1))
-                    .map(|s| s.rem_euclid(n_strips) as usize)
-                    .collect::<Vec<_>>()
+            // Strips as unwrapped indices: in a periodic box every strip once, even when
+            // the window wraps all the way round; at walls the edge strips hold the rest.
+            let (first_strip, last_strip) = if PERIODIC {
+                (lowest, highest.min(lowest + n_strips - 1))
             } else {
-                (lowest.clamp(0, n_strips - 1)..=highest.clamp(0, n_strips - 1))
-                    .map(|s| s as usize)
-                    .collect()
+                (
+                    lowest.clamp(0, n_strips - 1),
+                    highest.clamp(0, n_strips - 1),
+                )
             };
             // x windows of build positions: one, or two where a periodic window wraps.
-            let mut windows = vec![(xa - reach, xa + reach)];
-            if PERIODIC && reach < 0.5 * width {
-                if xa - reach < 0.0 {
-                    windows.push((xa - reach + width, width));
-                } else if xa + reach > width {
-                    windows.push((0.0, xa + reach - width));
+            let whole = (f64::NEG_INFINITY, f64::INFINITY);
+            let windows = match (PERIODIC, reach < 0.5 * width) {
+                (false, _) => [(xa - reach, xa + reach), (0.0, 0.0)],
+                (true, false) => [whole, (0.0, 0.0)],
+                (true, true) if xa - reach < 0.0 => {
+                    [(xa - reach, xa + reach), (xa - reach + width, width)]
                 }
-            } else if PERIODIC {
-                windows = vec![(f64::NEG_INFINITY, f64::INFINITY)];
-            }
-            for strip in strips {
-                let entries = &self.strips[strip][..];
+                (true, true) if xa + reach > width => {
+                    [(xa - reach, xa + reach), (0.0, xa + reach - width)]
+                }
+                (true, true) => [(xa - reach, xa + reach), (0.0, 0.0)],
+            };
+            for strip in first_strip..=last_strip {
+                let entries = &self.strips[strip.rem_euclid(n_strips) as usize][..];
+                // A window with `from == to` holds nothing.
                 for &(from, to) in &windows {
                     let first = entries.partition_point(|b| b.x < from);
                     for b in entries[first..].iter().take_while(|b| b.x < to) {

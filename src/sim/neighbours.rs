@@ -59,12 +59,7 @@ impl Skin {
     /// the lists are rebuilt every step.
     pub fn for_scene(domain: &Domain, particles: &Particles, dt: f64) -> Skin {
         let max_radius = particles.max_radius();
-        let disk_area: f64 = particles
-            .radius
-            .iter()
-            .map(|r| std::f64::consts::PI * r * r)
-            .sum();
-        let packing = disk_area / domain.area();
+        let packing = particles.disk_area() / domain.area();
         let dense = ((packing - 0.05) / (0.3 - 0.05)).clamp(0.0, 1.0);
         let radii = SKIN_RADII_DILUTE + dense * (SKIN_RADII_DENSE - SKIN_RADII_DILUTE);
         let longest_step = particles.max_speed() * dt;

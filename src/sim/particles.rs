@@ -203,6 +203,14 @@ impl Particles {
         }
     }
 
+    /// Σ π r²: the area the disks cover, summed in storage order.
+    pub fn disk_area(&self) -> f64 {
+        self.radius
+            .iter()
+            .map(|r| std::f64::consts::PI * r * r)
+            .sum()
+    }
+
     /// Largest radius, 0 for an empty set.
     pub fn max_radius(&self) -> f64 {
         self.radius.iter().copied().fold(0.0, f64::max)

@@ -153,13 +153,7 @@ pub struct Scene {
 impl Scene {
     /// Area fraction covered by disks.
     pub fn packing(&self) -> f64 {
-        let disk_area: f64 = self
-            .particles
-            .radius
-            .iter()
-            .map(|r| std::f64::consts::PI * r * r)
-            .sum();
-        disk_area / self.domain.area()
+        self.particles.disk_area() / self.domain.area()
     }
 }
 
