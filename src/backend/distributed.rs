@@ -253,11 +253,13 @@ impl RankState {
     fn step<C: Communicator>(&mut self, comm: &C, dt: f64) {
         let mut stages = self.stages;
         timed(&mut stages.integration, || {
+            let n_particles = self.particles.len();
             let walls = advance_disks(
                 &self.domain,
                 &self.physics,
                 dt,
                 self.particles.disk_slices_mut(),
+                self.skin.tracking(n_particles),
             );
             self.counters.merge(&walls);
         });
@@ -298,14 +300,9 @@ impl RankState {
 
     /// The square of the largest distance an own disk moved since the last build
     /// (infinite before the first).
-    fn largest_displacement_sq(&self) -> f64 {
-        if self.skin.is_built_for(&self.particles) {
-            let range = 0..self.particles.len();
-            self.skin
-                .largest_displacement_sq(range, &self.particles, &self.domain)
-        } else {
-            f64::INFINITY
-        }
+    fn largest_displacement_sq(&mut self) -> f64 {
+        self.skin
+            .largest_displacement_sq(&self.particles, &self.domain)
     }
 
     /// Re-sorts the slab after the disks moved; returns, packed per destination rank,

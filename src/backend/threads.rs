@@ -24,7 +24,7 @@ use crate::sim::grid::{
     Contact, Entry, StripGrid, find_contacts_all_pairs_from, number_slots, receive_band,
     refresh_band,
 };
-use crate::sim::neighbours::{PairList, Skin};
+use crate::sim::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin};
 use crate::sim::observe::observe;
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::ContactSchedule;
@@ -166,7 +166,12 @@ impl ThreadedStepper {
 
     fn advance(&mut self, particles: &mut Particles) {
         let (domain, physics, dt) = (&self.domain, &self.physics, self.params.dt);
-        let chunk = particles.len().div_ceil(4 * self.n_bands).max(MIN_CHUNK);
+        let chunk = self.chunk(particles.len());
+        let n_chunks = particles.len().div_ceil(chunk);
+        let displacements: Vec<Option<Displacements>> = match self.skin.tracking(particles.len()) {
+            Some(record) => record.into_chunks(chunk).map(Some).collect(),
+            None => (0..n_chunks).map(|_| None).collect(),
+        };
         let DiskSlices {
             x,
             y,
@@ -180,7 +185,8 @@ impl ThreadedStepper {
             .zip(vx.par_chunks_mut(chunk))
             .zip(vy.par_chunks_mut(chunk))
             .zip(radius.par_chunks(chunk))
-            .map(|((((x, y), vx), vy), radius)| {
+            .zip(displacements)
+            .map(|(((((x, y), vx), vy), radius), displacements)| {
                 advance_disks(
                     domain,
                     physics,
@@ -192,6 +198,7 @@ impl ThreadedStepper {
                         vy,
                         radius,
                     },
+                    displacements,
                 )
             })
             // Counts and maxima only: the same totals in any order.
@@ -200,6 +207,15 @@ impl ThreadedStepper {
                 a
             });
         self.counters.merge(&walls);
+    }
+
+    /// Disks per parallel chunk of the per-disk stages: whole blocks of the lists'
+    /// displacement record, at least [`MIN_CHUNK`], about four chunks per thread.
+    fn chunk(&self, n_particles: usize) -> usize {
+        n_particles
+            .div_ceil(4 * self.n_bands)
+            .max(MIN_CHUNK)
+            .next_multiple_of(DISPLACEMENT_BLOCK)
     }
 
     fn find_contacts(&mut self, particles: &mut Particles) {
@@ -256,19 +272,10 @@ impl ThreadedStepper {
     fn contacts_of_escapees(&mut self, particles: &mut Particles) -> Vec<Contact> {
         let n = particles.len();
         self.touched.resize(n, false);
-        let chunk = n.div_ceil(4 * self.n_bands).max(MIN_CHUNK);
+        let chunk = self.chunk(n);
         let chunks = || (0..n.div_ceil(chunk)).map(move |k| k * chunk..n.min((k + 1) * chunk));
+        let largest_sq = self.skin.largest_displacement_sq(particles, &self.domain);
         let (skin, domain, now) = (&self.skin, &self.domain, &*particles);
-        let largest_sq = if skin.is_built_for(particles) {
-            chunks()
-                .collect::<Vec<_>>()
-                .into_par_iter()
-                .map(|range| skin.largest_displacement_sq(range, now, domain))
-                // NaN (a disk gone astray) wins, so that it counts as stale.
-                .reduce(|| 0.0, |a, b| if a >= b || a.is_nan() { a } else { b })
-        } else {
-            f64::INFINITY
-        };
         if !skin.is_exceeded(largest_sq) {
             return Vec::new();
         }
@@ -278,7 +285,7 @@ impl ThreadedStepper {
                 .into_par_iter()
                 .map(|range| {
                     let mut escapees = Vec::new();
-                    skin.escapees(range, now, domain, &mut escapees);
+                    skin.escapees(range, &mut escapees);
                     escapees
                 })
                 .collect();

@@ -49,6 +49,94 @@ pub struct Skin {
     /// Positions at the last build, by storage index.
     x_built: Vec<f64>,
     y_built: Vec<f64>,
+    /// Per block of [`DISPLACEMENT_BLOCK`] disks (by storage index): which of them had
+    /// moved half the skin since the build, as of the last move (bit i: the block's
+    /// disk i).
+    escaped: Vec<u64>,
+    /// Whether the last move marked `escaped` ([`Skin::tracking`]) and nothing read it
+    /// yet.
+    tracked: bool,
+}
+
+/// Disks per block of the displacement record: the bits of a `u64`.
+pub const DISPLACEMENT_BLOCK: usize = 64;
+
+/// A move's view of the lists' record (of one chunk of disks, starting at a block
+/// boundary): where the disks were at the build, how far is half the skin, and the
+/// blocks' marks to fill.
+pub struct Displacements<'a> {
+    pub x_built: &'a [f64],
+    pub y_built: &'a [f64],
+    /// The square of the distance at which a disk escapes the lists.
+    pub escape_sq: f64,
+    pub escaped: &'a mut [u64],
+}
+
+impl<'a> Displacements<'a> {
+    /// The record cut into the chunks of `chunk` disks (a multiple of
+    /// [`DISPLACEMENT_BLOCK`]) that moves in parallel take.
+    pub fn into_chunks(self, chunk: usize) -> impl Iterator<Item = Displacements<'a>> {
+        assert_eq!(chunk % DISPLACEMENT_BLOCK, 0, "chunks of whole blocks");
+        let escape_sq = self.escape_sq;
+        self.x_built
+            .chunks(chunk)
+            .zip(self.y_built.chunks(chunk))
+            .zip(self.escaped.chunks_mut(chunk / DISPLACEMENT_BLOCK))
+            .map(move |((x_built, y_built), escaped)| Displacements {
+                x_built,
+                y_built,
+                escape_sq,
+                escaped,
+            })
+    }
+
+    /// Marks the escapees from the disks' positions now (`x`, `y`: the chunk's).
+    pub fn measure(self, x: &[f64], y: &[f64], domain: &Domain) {
+        match domain.boundary {
+            Boundary::Walls => self.measure_in::<false>(x, y, domain),
+            Boundary::Periodic => self.measure_in::<true>(x, y, domain),
+        }
+    }
+
+    fn measure_in<const PERIODIC: bool>(self, x: &[f64], y: &[f64], domain: &Domain) {
+        let blocks = x
+            .chunks(DISPLACEMENT_BLOCK)
+            .zip(y.chunks(DISPLACEMENT_BLOCK))
+            .zip(self.x_built.chunks(DISPLACEMENT_BLOCK))
+            .zip(self.y_built.chunks(DISPLACEMENT_BLOCK));
+        for ((((x, y), x0), y0), escaped) in blocks.zip(self.escaped.iter_mut()) {
+            *escaped = mark_escapees::<PERIODIC>(x, y, x0, y0, domain, self.escape_sq);
+        }
+    }
+}
+
+/// Which disks of one block (bit i: disk i) moved from (`x0`, `y0`) to (`x`, `y`) at
+/// least √`escape_sq`, or went astray (NaN). Branch-free; later searches for escapees
+/// read the bits instead of the positions.
+#[inline(always)]
+pub fn mark_escapees<const PERIODIC: bool>(
+    x: &[f64],
+    y: &[f64],
+    x0: &[f64],
+    y0: &[f64],
+    domain: &Domain,
+    escape_sq: f64,
+) -> u64 {
+    let n = x.len().min(DISPLACEMENT_BLOCK);
+    let (x, y, x0, y0) = (&x[..n], &y[..n], &x0[..n], &y0[..n]);
+    let mut escaped = 0;
+    for i in 0..n {
+        let (dx, dy) = domain.separation_in::<PERIODIC>(x0[i], y0[i], x[i], y[i]);
+        escaped |= u64::from(!(dx * dx + dy * dy < escape_sq)) << i;
+    }
+    escaped
+}
+
+/// The larger of two squared distances, NaN winning (a disk gone astray makes the
+/// lists stale: [`Skin::is_exceeded`]).
+#[inline(always)]
+fn larger(a: f64, b: f64) -> f64 {
+    if a >= b || a.is_nan() { a } else { b }
 }
 
 impl Skin {
@@ -90,76 +178,81 @@ impl Skin {
         self.x_built.len() == particles.len()
     }
 
+    /// The square of the distance at which a disk escapes the lists (half the skin,
+    /// less a margin for rounding).
+    fn escape_sq(&self) -> f64 {
+        let half = 0.5 * SAFE_SKIN_FRACTION * self.width;
+        half * half
+    }
+
     /// True when a disk that moved √`largest_displacement_sq` makes the lists stale.
     pub fn is_exceeded(&self, largest_displacement_sq: f64) -> bool {
-        let half = 0.5 * SAFE_SKIN_FRACTION * self.width;
         // NaN (a disk gone astray) counts as stale too.
-        largest_displacement_sq.is_nan() || largest_displacement_sq >= half * half
+        !(largest_displacement_sq < self.escape_sq())
     }
 
-    /// The square of the largest distance a disk stored in `range` moved since the last
-    /// build. The recorded positions must be of these disks ([`Skin::is_built_for`]).
-    pub fn largest_displacement_sq(
-        &self,
-        range: Range<usize>,
-        particles: &Particles,
-        domain: &Domain,
-    ) -> f64 {
-        match domain.boundary {
-            Boundary::Walls => self.largest_displacement_in::<false>(range, particles, domain),
-            Boundary::Periodic => self.largest_displacement_in::<true>(range, particles, domain),
+    /// The slices a move fills in for the lists ([`crate::sim::step::advance_disks`]):
+    /// the positions of the last build and the per-block marks of escapees. `None`
+    /// before the first build, or when the move is of another number of disks
+    /// (`n_particles`) than the build. What the move records is read by the next
+    /// [`Skin::largest_displacement_sq`].
+    pub fn tracking(&mut self, n_particles: usize) -> Option<Displacements<'_>> {
+        if self.x_built.len() != n_particles {
+            return None;
+        }
+        self.tracked = true;
+        Some(self.displacements())
+    }
+
+    fn displacements(&mut self) -> Displacements<'_> {
+        Displacements {
+            x_built: &self.x_built,
+            y_built: &self.y_built,
+            escape_sq: self.escape_sq(),
+            escaped: &mut self.escaped,
         }
     }
 
-    fn largest_displacement_in<const PERIODIC: bool>(
-        &self,
-        range: Range<usize>,
-        particles: &Particles,
-        domain: &Domain,
-    ) -> f64 {
-        let moved_sq = |x0: f64, y0: f64, x: f64, y: f64| {
-            let (dx, dy) = domain.separation_in::<PERIODIC>(x0, y0, x, y);
-            dx * dx + dy * dy
-        };
-        // NaN propagates: a comparison that fails keeps the NaN (see `is_exceeded`).
-        let larger = |a: f64, b: f64| if a >= b || a.is_nan() { a } else { b };
-        let (x, y) = (&particles.x[range.clone()], &particles.y[range.clone()]);
-        let (x0, y0) = (&self.x_built[range.clone()], &self.y_built[range]);
-        // Four independent running maxima (selects, not `f64::max` with its NaN rules),
-        // so the loop vectorises; then the largest of the four.
-        let mut largest = [0.0_f64; 4];
-        let (x4, y4) = (x.chunks_exact(4), y.chunks_exact(4));
-        let (x04, y04) = (x0.chunks_exact(4), y0.chunks_exact(4));
-        let tail = x4.remainder().iter().zip(y4.remainder());
-        let built_tail = x04.remainder().iter().zip(y04.remainder());
-        for (((x, y), x0), y0) in x4.zip(y4).zip(x04).zip(y04) {
-            for lane in 0..4 {
-                let d_sq = moved_sq(x0[lane], y0[lane], x[lane], y[lane]);
-                largest[lane] = larger(largest[lane], d_sq);
-            }
+    /// The square of the largest distance a disk moved since the last build, if one
+    /// moved half the skin (the lists are stale: [`Skin::is_exceeded`]), and 0 if none
+    /// did; infinite before the first build. Reads what the last move marked
+    /// ([`Skin::tracking`]), or, if the disks were not moved through it since, marks
+    /// now. Afterwards [`Skin::escapees`] may ask which disks escaped.
+    pub fn largest_displacement_sq(&mut self, particles: &Particles, domain: &Domain) -> f64 {
+        if !self.is_built_for(particles) {
+            return f64::INFINITY;
         }
-        for ((&x, &y), (&x0, &y0)) in tail.zip(built_tail) {
-            largest[0] = larger(largest[0], moved_sq(x0, y0, x, y));
+        if !std::mem::take(&mut self.tracked) {
+            self.displacements()
+                .measure(&particles.x, &particles.y, domain);
         }
-        largest.into_iter().fold(0.0, larger)
+        let mut largest = 0.0;
+        self.for_each_escapee(0..particles.len(), |idx| {
+            let (x0, y0) = (self.x_built[idx], self.y_built[idx]);
+            let (dx, dy) = domain.separation(x0, y0, particles.x[idx], particles.y[idx]);
+            largest = larger(largest, dx * dx + dy * dy);
+        });
+        largest
     }
 
     /// Appends the storage indices, in order, of the disks stored in `range` that moved
-    /// half the skin since the last build: the lists may miss their pairs, and only theirs.
-    pub fn escapees(
-        &self,
-        range: Range<usize>,
-        particles: &Particles,
-        domain: &Domain,
-        escapees: &mut Vec<u32>,
-    ) {
-        let half = 0.5 * SAFE_SKIN_FRACTION * self.width;
-        for idx in range {
-            let (x0, y0) = (self.x_built[idx], self.y_built[idx]);
-            let (dx, dy) = domain.separation(x0, y0, particles.x[idx], particles.y[idx]);
-            let moved_sq = dx * dx + dy * dy;
-            if moved_sq.is_nan() || moved_sq >= half * half {
-                escapees.push(idx as u32);
+    /// half the skin since the last build: the lists may miss their pairs, and only
+    /// theirs. Reads the marks of [`Skin::largest_displacement_sq`]. `range` starts at
+    /// a block boundary.
+    pub fn escapees(&self, range: Range<usize>, escapees: &mut Vec<u32>) {
+        self.for_each_escapee(range, |idx| escapees.push(idx as u32));
+    }
+
+    /// Calls `visit` with the storage index of every escapee in `range` (which starts
+    /// at a block boundary), in order.
+    fn for_each_escapee(&self, range: Range<usize>, mut visit: impl FnMut(usize)) {
+        debug_assert_eq!(range.start % DISPLACEMENT_BLOCK, 0);
+        let blocks = range.start / DISPLACEMENT_BLOCK..range.end.div_ceil(DISPLACEMENT_BLOCK);
+        for block in blocks {
+            let mut marks = self.escaped[block];
+            while marks != 0 {
+                visit(block * DISPLACEMENT_BLOCK + marks.trailing_zeros() as usize);
+                marks &= marks - 1;
             }
         }
     }
@@ -182,6 +275,10 @@ impl Skin {
     pub fn record(&mut self, particles: &Particles) {
         self.x_built.clone_from(&particles.x);
         self.y_built.clone_from(&particles.y);
+        self.escaped.clear();
+        self.escaped
+            .resize(particles.len().div_ceil(DISPLACEMENT_BLOCK), 0);
+        self.tracked = false;
     }
 
     /// Where the disk stored at `idx` was at the last build: `(x, y)`.

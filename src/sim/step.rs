@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use super::collision::ContactOutcome;
 use super::grid::{Contact, StripGrid, find_contacts_all_pairs};
-use super::neighbours::{PairList, Skin};
+use super::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin, mark_escapees};
 use super::particles::{DiskSlices, Particles};
 use super::resolve::resolve_contacts;
 use super::scene::{Boundary, Domain, Physics, Scene, wrap_periodic};
@@ -130,11 +130,13 @@ impl Stepper {
 
     /// Moves every disk by one dt and applies the boundary ([`advance_disks`]).
     pub fn advance(&mut self, particles: &mut Particles) {
+        let n_particles = particles.len();
         let walls = advance_disks(
             &self.domain,
             &self.physics,
             self.params.dt,
             particles.disk_slices_mut(),
+            self.skin.tracking(n_particles),
         );
         self.counters.merge(&walls);
     }
@@ -160,18 +162,12 @@ impl Stepper {
     /// queries of the grid instead of a rebuild.
     fn find_contacts_listed(&mut self, particles: &mut Particles) {
         let domain = &self.domain.clone();
-        let largest_sq = if self.skin.is_built_for(particles) {
-            self.skin
-                .largest_displacement_sq(0..particles.len(), particles, domain)
-        } else {
-            f64::INFINITY
-        };
+        let largest_sq = self.skin.largest_displacement_sq(particles, domain);
         self.escapees.clear();
         if self.skin.is_exceeded(largest_sq) {
             if largest_sq <= self.skin.width() * self.skin.width() {
                 let all = 0..particles.len();
-                self.skin
-                    .escapees(all, particles, domain, &mut self.escapees);
+                self.skin.escapees(all, &mut self.escapees);
             }
             if !self
                 .skin
@@ -264,15 +260,36 @@ impl StepCounters {
 /// The per-disk half of a step for any chunk of disks: move them by one dt (the
 /// seed's equations 8–9, x += v·dt, without a field; velocity Verlet, equations 6–7,
 /// with a constant one), then reflect those that touch a wall while moving outward, or
-/// wrap periodic ones. No disk's update reads another's, so chunks can go in any order
-/// or in parallel. Returns what the walls saw: the reflections and the deepest
+/// wrap periodic ones; with `displacements` (the neighbour lists' record of this chunk,
+/// which starts at a block boundary), also how far each block's disks are from where
+/// the lists were built. No disk's update reads another's, so chunks can go in any
+/// order or in parallel. Returns what the walls saw: the reflections and the deepest
 /// penetration (the other counters are zero).
+///
+/// One pass over the disks, a block of [`DISPLACEMENT_BLOCK`] at a time, so that each
+/// disk is read once per step; the loops over a block vectorise (their length is not
+/// fixed at compile time: fully unrolled, they would not).
 pub fn advance_disks(
     domain: &Domain,
     physics: &Physics,
     dt: f64,
     disks: DiskSlices<'_>,
+    displacements: Option<Displacements<'_>>,
 ) -> StepCounters {
+    match domain.boundary {
+        Boundary::Walls => advance_in::<false>(domain, physics, dt, disks, displacements),
+        Boundary::Periodic => advance_in::<true>(domain, physics, dt, disks, displacements),
+    }
+}
+
+fn advance_in<const PERIODIC: bool>(
+    domain: &Domain,
+    physics: &Physics,
+    dt: f64,
+    disks: DiskSlices<'_>,
+    displacements: Option<Displacements<'_>>,
+) -> StepCounters {
+    const B: usize = DISPLACEMENT_BLOCK;
     let DiskSlices {
         x,
         y,
@@ -280,6 +297,54 @@ pub fn advance_disks(
         vy,
         radius,
     } = disks;
+    let mut walls = StepCounters::default();
+    let mut record = displacements.map(|record| {
+        (
+            record.x_built.chunks(B),
+            record.y_built.chunks(B),
+            record.escaped.iter_mut(),
+            record.escape_sq,
+        )
+    });
+    let blocks = x
+        .chunks_mut(B)
+        .zip(y.chunks_mut(B))
+        .zip(vx.chunks_mut(B))
+        .zip(vy.chunks_mut(B))
+        .zip(radius.chunks(B));
+    for ((((x, y), vx), vy), radius) in blocks {
+        let record = record
+            .as_mut()
+            .and_then(|(x_built, y_built, counts, escape_sq)| {
+                Some((x_built.next()?, y_built.next()?, counts.next()?, *escape_sq))
+            });
+        advance_block::<PERIODIC>(
+            x, y, vx, vy, radius, domain, physics, dt, record, &mut walls,
+        );
+    }
+    walls
+}
+
+/// Moves the disks of one block of [`DISPLACEMENT_BLOCK`] (fewer in a chunk's last),
+/// applies the boundary, and with `record` (where they were at the lists' build, the
+/// slot for the block's marks of escapees, and the squared distance at which a disk
+/// escapes) marks the disks that escaped the lists.
+/// Not inlined: as a function's arguments the slices are known not to alias, which
+/// lets its loops vectorise.
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn advance_block<const PERIODIC: bool>(
+    x: &mut [f64],
+    y: &mut [f64],
+    vx: &mut [f64],
+    vy: &mut [f64],
+    radius: &[f64],
+    domain: &Domain,
+    physics: &Physics,
+    dt: f64,
+    record: Option<(&[f64], &[f64], &mut u64, f64)>,
+    walls: &mut StepCounters,
+) {
     match physics.gravity {
         None => {
             drift(x, vx, dt);
@@ -290,22 +355,18 @@ pub fn advance_disks(
             accelerate(y, vy, gy, dt);
         }
     }
-    match domain.boundary {
-        Boundary::Periodic => {
-            for x in x.iter_mut() {
-                *x = wrap_periodic(*x, domain.width);
-            }
-            for y in y.iter_mut() {
-                *y = wrap_periodic(*y, domain.height);
-            }
-            StepCounters::default()
+    if PERIODIC {
+        for x in x.iter_mut() {
+            *x = wrap_periodic(*x, domain.width);
         }
-        Boundary::Walls => {
-            let e = physics.wall_restitution;
-            let mut walls = reflect_at_walls(x, vx, radius, domain.width, e);
-            walls.merge(&reflect_at_walls(y, vy, radius, domain.height, e));
-            walls
+        for y in y.iter_mut() {
+            *y = wrap_periodic(*y, domain.height);
         }
+    } else {
+        reflect_at_walls(x, y, vx, vy, radius, domain, physics, walls);
+    }
+    if let Some((x0, y0, escapees, escape_sq)) = record {
+        *escapees = mark_escapees::<PERIODIC>(x, y, x0, y0, domain, escape_sq);
     }
 }
 
@@ -324,54 +385,52 @@ fn accelerate(positions: &mut [f64], velocities: &mut [f64], acceleration: f64, 
     }
 }
 
-/// Reflects, along one axis, the disks that touch the wall at 0 or at `length` and move
-/// towards it. Returns how many it reflected and the deepest penetration.
+/// Reflects the disks of one block that touch a wall and move towards it, counting
+/// the reflections and the deepest penetration into `walls`. Few disks touch a wall in
+/// any step: a branch-free test of the whole block (it vectorises) finds the blocks with
+/// one near a wall, and only those are looked at disk by disk. The branch is almost
+/// never taken, so it is well predicted. A disk not near a wall is not in it: its
+/// penetration is negative and cannot be deepest.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn reflect_at_walls(
-    positions: &[f64],
-    velocities: &mut [f64],
-    radii: &[f64],
-    length: f64,
-    wall_restitution: f64,
-) -> StepCounters {
-    let mut deepest = 0.0_f64;
-    let mut reflect = |p: f64, v: &mut f64, r: f64| {
+    x: &[f64],
+    y: &[f64],
+    vx: &mut [f64],
+    vy: &mut [f64],
+    radius: &[f64],
+    domain: &Domain,
+    physics: &Physics,
+    walls: &mut StepCounters,
+) {
+    let (width, height) = (domain.width, domain.height);
+    // How many disks of the block are near a wall: an integer sum, which vectorises (a
+    // NaN disk is near no wall).
+    let near = x
+        .iter()
+        .zip(y)
+        .zip(radius)
+        .fold(0_u32, |near, ((&x, &y), &r)| {
+            let outside = (x - r < 0.0) | (x + r > width) | (y - r < 0.0) | (y + r > height);
+            near + u32::from(outside)
+        });
+    if near == 0 {
+        return;
+    }
+    let e = physics.wall_restitution;
+    let mut reflect = |p: f64, v: &mut f64, r: f64, length: f64| {
         let outward = (p - r < 0.0 && *v < 0.0) || (p + r > length && *v > 0.0);
         if outward {
-            *v *= -wall_restitution;
+            *v *= -e;
         }
-        deepest = deepest.max((r - p).max(p + r - length) / r);
-        u64::from(outward)
+        walls.max_wall_penetration = walls
+            .max_wall_penetration
+            .max((r - p).max(p + r - length) / r);
+        walls.wall_collisions += u64::from(outward);
     };
-    // Few disks touch a wall in any step: a branch-free test of four disks at a time
-    // (it vectorises) finds the groups with one near a wall, and only those are looked
-    // at one by one. The branch is almost never taken, so it is well predicted. A disk
-    // not near a wall is not in it: its penetration is negative and cannot be deepest.
-    let mut hits = 0;
-    let mut positions4 = positions.chunks_exact(4);
-    let mut velocities4 = velocities.chunks_exact_mut(4);
-    let mut radii4 = radii.chunks_exact(4);
-    for ((p, v), r) in (&mut positions4).zip(&mut velocities4).zip(&mut radii4) {
-        let mut near = false;
-        for lane in 0..4 {
-            near |= (p[lane] - r[lane] < 0.0) | (p[lane] + r[lane] > length);
-        }
-        if near {
-            for lane in 0..4 {
-                hits += reflect(p[lane], &mut v[lane], r[lane]);
-            }
-        }
-    }
-    let rest = positions4
-        .remainder()
-        .iter()
-        .zip(velocities4.into_remainder());
-    for ((&p, v), &r) in rest.zip(radii4.remainder()) {
-        hits += reflect(p, v, r);
-    }
-    StepCounters {
-        wall_collisions: hits,
-        max_wall_penetration: deepest,
-        ..StepCounters::default()
+    for i in 0..radius.len() {
+        reflect(x[i], &mut vx[i], radius[i], width);
+        reflect(y[i], &mut vy[i], radius[i], height);
     }
 }
 
