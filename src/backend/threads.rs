@@ -244,13 +244,19 @@ impl ThreadedStepper {
                     .zip(self.contacts.par_iter_mut())
                     .zip(self.handed_over.par_iter_mut())
                     .zip(self.schedules.par_iter_mut())
-                    .for_each(|(((list, contacts), handed_over), schedule)| {
+                    .for_each(|(((list, band_contacts), band_handed_over), schedule)| {
+                        // Filled as locals: the lengths of the bands' vectors share cache
+                        // lines, and each push would bounce them between threads.
+                        let mut contacts = std::mem::take(band_contacts);
+                        let mut handed_over = std::mem::take(band_handed_over);
                         contacts.clear();
                         handed_over.clear();
-                        list.find_contacts(particles, domain, contacts);
+                        list.find_contacts(particles, domain, &mut contacts);
                         // Split while the pairs are in list order, close in memory.
-                        schedule.split(particles.len(), contacts, handed_over, pinned);
+                        schedule.split(particles.len(), &mut contacts, &mut handed_over, pinned);
                         contacts.sort_unstable_by_key(|contact| contact.key);
+                        *band_contacts = contacts;
+                        *band_handed_over = handed_over;
                     });
                 self.crossing.extend(self.handed_over.iter().flatten());
                 self.crossing.extend_from_slice(&escaped);
@@ -352,9 +358,12 @@ impl ThreadedStepper {
             slices
                 .par_iter_mut()
                 .zip(self.movers.par_iter_mut())
-                .for_each(|((first, band), movers)| {
+                .for_each(|((first, band), band_movers)| {
+                    // A local, for the reason given in `find_contacts`.
+                    let mut movers = std::mem::take(band_movers);
                     movers.clear();
-                    refresh_band(&layout, band, *first, particles, movers);
+                    refresh_band(&layout, band, *first, particles, &mut movers);
+                    *band_movers = movers;
                 });
             let movers: Vec<&[Entry]> = self.movers.iter().map(Vec::as_slice).collect();
             slices

@@ -309,8 +309,12 @@ impl PairList {
         domain: &Domain,
         skin: &Skin,
     ) {
-        self.pairs.clear();
-        grid.find_pairs_in(strips, domain, skin.width(), &mut self.pairs);
+        // Filled as a local: lists of other bands sit in the same cache line as this
+        // one's length, which every candidate updates (false sharing between threads).
+        let mut pairs = std::mem::take(&mut self.pairs);
+        pairs.clear();
+        grid.find_pairs_in(strips, domain, skin.width(), &mut pairs);
+        self.pairs = pairs;
         self.n_particles = particles.len();
         self.equal_radii = grid.layout().has_equal_radii();
     }
