@@ -273,32 +273,22 @@ impl ThreadedStepper {
     }
 
     /// Rebuilds the lists when they are stale, as the serial stepper does, or else finds
-    /// the pairs of the disks that escaped them (in parallel chunks) and marks both disks
-    /// of each in `touched`: their chains go to the crossing list. Returns those pairs.
+    /// the pairs of the disks that escaped them (queries in parallel chunks) and marks
+    /// both disks of each in `touched`: their chains go to the crossing list. Returns
+    /// those pairs.
     fn contacts_of_escapees(&mut self, particles: &mut Particles) -> Vec<Contact> {
         let n = particles.len();
         self.touched.resize(n, false);
-        let chunk = self.chunk(n);
-        let chunks = || (0..n.div_ceil(chunk)).map(move |k| k * chunk..n.min((k + 1) * chunk));
         let largest_sq = self.skin.largest_displacement_sq(particles, &self.domain);
         let (skin, domain, now) = (&self.skin, &self.domain, &*particles);
         if !skin.is_exceeded(largest_sq) {
             return Vec::new();
         }
-        let escapees: Vec<u32> = if largest_sq <= skin.width() * skin.width() {
-            let found: Vec<Vec<u32>> = chunks()
-                .collect::<Vec<_>>()
-                .into_par_iter()
-                .map(|range| {
-                    let mut escapees = Vec::new();
-                    skin.escapees(range, &mut escapees);
-                    escapees
-                })
-                .collect();
-            found.concat()
-        } else {
-            Vec::new()
-        };
+        // The move marked the escapees: reading the marks is a short serial scan.
+        let mut escapees = Vec::new();
+        if largest_sq <= skin.width() * skin.width() {
+            skin.escapees(0..n, &mut escapees);
+        }
         if escapees.is_empty() || !skin.may_patch(escapees.len(), n, largest_sq) {
             self.rebuild_lists(particles);
             return Vec::new();
