@@ -286,7 +286,7 @@ impl ThreadedStepper {
         }
         // The move marked the escapees: reading the marks is a short serial scan.
         let mut escapees = Vec::new();
-        if largest_sq <= skin.width() * skin.width() {
+        if skin.may_reach(largest_sq) {
             skin.escapees(0..n, &mut escapees);
         }
         if escapees.is_empty() || !skin.may_patch(escapees.len(), n, largest_sq) {

@@ -38,6 +38,10 @@ const MIN_SKIN_RADII: f64 = 0.25;
 /// pairs found by queries), and are rebuilt after.
 const MAX_ESCAPEE_SHARE: usize = 64;
 
+/// Lists serve on while no disk moved further than this many skins (with queries for
+/// the escapees); a query's reach, and cost, grows with the distance.
+const MAX_PATCH_SKINS: f64 = 1.0;
+
 /// A disk escapes a list once it moved this fraction of half the skin: the margin
 /// covers rounding in the displacement and distance arithmetic.
 const SAFE_SKIN_FRACTION: f64 = 0.999;
@@ -267,8 +271,14 @@ impl Skin {
         n_particles: usize,
         largest_displacement_sq: f64,
     ) -> bool {
-        n_escapees * MAX_ESCAPEE_SHARE <= n_particles
-            && largest_displacement_sq <= self.width * self.width
+        n_escapees * MAX_ESCAPEE_SHARE <= n_particles && self.may_reach(largest_displacement_sq)
+    }
+
+    /// True when queries may serve disks that moved √`largest_displacement_sq`: at most
+    /// [`MAX_PATCH_SKINS`] skins.
+    pub fn may_reach(&self, largest_displacement_sq: f64) -> bool {
+        let reach = MAX_PATCH_SKINS * self.width;
+        largest_displacement_sq <= reach * reach
     }
 
     /// Records the disks' positions as those of a build.

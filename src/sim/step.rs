@@ -165,7 +165,7 @@ impl Stepper {
         let largest_sq = self.skin.largest_displacement_sq(particles, domain);
         self.escapees.clear();
         if self.skin.is_exceeded(largest_sq) {
-            if largest_sq <= self.skin.width() * self.skin.width() {
+            if self.skin.may_reach(largest_sq) {
                 let all = 0..particles.len();
                 self.skin.escapees(all, &mut self.escapees);
             }
