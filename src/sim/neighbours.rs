@@ -131,9 +131,16 @@ pub fn mark_escapees<const PERIODIC: bool>(
     let mut escaped = 0;
     for i in 0..n {
         let (dx, dy) = domain.separation_in::<PERIODIC>(x0[i], y0[i], x[i], y[i]);
-        escaped |= u64::from(!(dx * dx + dy * dy < escape_sq)) << i;
+        escaped |= u64::from(has_escaped(dx * dx + dy * dy, escape_sq)) << i;
     }
     escaped
+}
+
+/// True when a disk that moved √`moved_sq` escaped lists whose escape distance is
+/// √`escape_sq`; a disk gone astray (NaN) has escaped too. Branch-free.
+#[inline(always)]
+fn has_escaped(moved_sq: f64, escape_sq: f64) -> bool {
+    moved_sq.is_nan() | (moved_sq >= escape_sq)
 }
 
 /// The larger of two squared distances, NaN winning (a disk gone astray makes the
@@ -191,8 +198,7 @@ impl Skin {
 
     /// True when a disk that moved √`largest_displacement_sq` makes the lists stale.
     pub fn is_exceeded(&self, largest_displacement_sq: f64) -> bool {
-        // NaN (a disk gone astray) counts as stale too.
-        !(largest_displacement_sq < self.escape_sq())
+        has_escaped(largest_displacement_sq, self.escape_sq())
     }
 
     /// The slices a move fills in for the lists ([`crate::sim::step::advance_disks`]):
