@@ -393,7 +393,9 @@ impl PairList {
 
 #[cfg(test)]
 mod tests {
-    use crate::sim::grid::StripGrid;
+    use crate::sim::grid::{Contact, StripGrid};
+    use crate::sim::particles::Particles;
+    use crate::sim::scene::Scene;
     use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution};
     use crate::sim::{Boundary, Broadphase, Physics, StepParams, Stepper};
 
@@ -427,20 +429,9 @@ mod tests {
                         stepper.advance(&mut particles);
                         stepper.find_contacts(&mut particles);
                         rebuilt_or_patched += usize::from(!stepper.escapees.is_empty());
-                        let mut fresh = Vec::new();
-                        let mut grid = StripGrid::new(&scene.domain, &particles);
-                        grid.build(&particles);
-                        grid.find_contacts(&particles, &scene.domain, &mut fresh);
-                        fresh.sort_unstable_by_key(|contact| contact.key);
-                        let keys = |contacts: &[_]| -> Vec<u64> {
-                            contacts
-                                .iter()
-                                .map(|c: &crate::sim::grid::Contact| c.key)
-                                .collect()
-                        };
                         assert_eq!(
                             keys(stepper.contacts()),
-                            keys(&fresh),
+                            fresh_keys(&scene, &particles),
                             "{boundary:?} packing {packing} dt {dt} step {step}"
                         );
                         stepper.resolve_contacts(&mut particles);
@@ -449,5 +440,48 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The keys of the pairs a fresh search of the whole box finds, in canonical order.
+    fn fresh_keys(scene: &Scene, particles: &Particles) -> Vec<u64> {
+        let mut fresh = Vec::new();
+        let mut grid = StripGrid::new(&scene.domain, particles);
+        grid.build(particles);
+        grid.find_contacts(particles, &scene.domain, &mut fresh);
+        fresh.sort_unstable_by_key(|contact| contact.key);
+        keys(&fresh)
+    }
+
+    fn keys(contacts: &[Contact]) -> Vec<u64> {
+        contacts.iter().map(|contact| contact.key).collect()
+    }
+
+    /// Disks moved other than by the stepper's move (which marks the escapees as it goes)
+    /// are measured when contacts are asked for: a disk carried across the box, onto
+    /// another, is found in contact with it.
+    #[test]
+    fn disks_moved_outside_the_step_are_measured_before_contacts_are_found() {
+        let scene = GasSpec {
+            seed: 11,
+            ..GasSpec::unit(2000, 0.2)
+        }
+        .build()
+        .expect("places");
+        let params = StepParams {
+            dt: 0.05,
+            broadphase: Broadphase::Grid,
+        };
+        let mut particles = scene.particles.clone();
+        let mut stepper = Stepper::for_scene(&scene, params);
+        for _ in 0..3 {
+            stepper.step(&mut particles);
+        }
+        // Carry the disk stored last next to the disk stored first.
+        let last = particles.len() - 1;
+        particles.x[last] = particles.x[0] + 1.5;
+        particles.y[last] = particles.y[0];
+        stepper.find_contacts(&mut particles);
+        assert_eq!(keys(stepper.contacts()), fresh_keys(&scene, &particles));
+        assert!(!stepper.contacts().is_empty());
     }
 }
