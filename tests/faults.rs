@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 use collide::records::{self, Record};
 use polars::prelude::{Column, DataFrame, ParquetWriter};
 
-use crate::cli::{collide, scene_file};
-use crate::study::{manifest, processes_mentioning, sample_records};
+use crate::util::{collide, scene_file};
+use crate::util::{manifest, processes_mentioning, sample_records};
 
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()

@@ -11,8 +11,8 @@ use collide::limits::{MAX_WORKERS_PER_CORE, Machine};
 use collide::records;
 use rustix::process::Signal;
 
-use crate::cli::{collide, scene_file};
-use crate::study::interrupt_after_first_row;
+use crate::util::interrupt_after_first_row;
+use crate::util::{collide, scene_file};
 
 const SCENE: &str = "[scene]\nn = 200\npacking = 0.1\nseed = 3\n[method]\ndt = 0.1\nsteps = 20\n";
 

@@ -232,7 +232,7 @@ fn render_draws_the_disks_as_a_png_and_the_run_as_a_gif() {
 
     let dir = tempfile::tempdir().unwrap();
     let (png, gif) = (dir.path().join("scene.png"), dir.path().join("run.gif"));
-    let out = crate::cli::collide(&[
+    let out = crate::util::collide(&[
         "render",
         "experiments/scenes/seed-1000.toml",
         "--n",
@@ -298,7 +298,7 @@ fn a_file_written_by_schema_version_1_is_reported_as_timed_strong_scaling() {
     // A real file of the seed-report study, written by the collide of schema version 1
     // (no scaling, method or accuracy columns).
     let dir = tempfile::tempdir().unwrap();
-    let out = crate::cli::collide(&[
+    let out = crate::util::collide(&[
         "report",
         "tests/fixtures/schema-1-seed-report.parquet",
         "--out",
@@ -342,7 +342,7 @@ fn a_file_missing_a_measured_column_or_from_a_newer_collide_is_refused_with_the_
     ];
     for (reason, edit) in cases {
         let path = parquet_with(dir.path(), &records(), edit);
-        let out = crate::cli::collide(&[
+        let out = crate::util::collide(&[
             "report",
             path.to_str().unwrap(),
             "--out",

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use polars::prelude::DataType;
 
-use crate::cli::json_summary;
+use crate::util::json_summary;
 
 const DOC: &str = "docs/records.md";
 

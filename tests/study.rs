@@ -2,26 +2,13 @@
 //! and bad input.
 
 use std::os::unix::fs::PermissionsExt;
-use std::path::Path;
 use std::time::{Duration, Instant};
 
-use collide::environment::Environment;
-use collide::records::{self, Record, RecordContext, STATUS_TIMED_OUT};
-use collide::summary::RunSummary;
+use collide::records::{self, STATUS_TIMED_OUT};
 
-use crate::cli::{collide, json_summary, scene_file};
-
-const SCENE: &str = "[scene]\nn = 200\npacking = 0.1\nseed = 3\n[method]\ndt = 0.1\nsteps = 20\n";
-
-/// A manifest over `scene.toml` (written beside it) with the given extra text.
-pub fn manifest(dir: &Path, body: &str) -> String {
-    scene_file(dir, "scene.toml", SCENE);
-    let text = format!("name = \"tiny\"\n{body}\n[[scenes]]\nfile = \"scene.toml\"\n");
-    scene_file(dir, "tiny.toml", &text)
-        .to_str()
-        .unwrap()
-        .to_owned()
-}
+use crate::util::{
+    collide, interrupt_after_first_row, manifest, processes_mentioning, sample_records, scene_file,
+};
 
 const BACKENDS: &str = "[backends]\nserial = true\nrayon = [2]\n";
 
@@ -323,34 +310,6 @@ fn a_study_of_mpi_configurations_only_is_an_error_without_mpi() {
     );
 }
 
-pub fn sample_records() -> Vec<Record> {
-    let environment = Environment::capture();
-    let context = RecordContext {
-        study: "s",
-        manifest_hash: "m",
-        build_id: "b",
-        config_key: "k",
-        scene: "seed",
-        scaling: "strong",
-        backend: "rayon",
-        workers: 2,
-        repetition: 1,
-        environment: &environment,
-        study_started_utc: "2026-11-22T00:00:00Z",
-    };
-    let json = json_summary(&[
-        "simulate",
-        "experiments/scenes/seed-1000.toml",
-        "--steps",
-        "10",
-    ]);
-    let summary: RunSummary = serde_json::from_value(json).unwrap();
-    vec![
-        Record::measured(&context, &summary),
-        Record::failed(&context, STATUS_TIMED_OUT, "killed after 1 s".into()),
-    ]
-}
-
 #[test]
 fn records_round_trip_through_parquet_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
@@ -396,59 +355,6 @@ fn corrupt_foreign_and_old_results_are_refused_with_the_reason() {
     let empty = tempfile::tempdir().unwrap();
     let stderr = stderr_of(&["results", empty.path().to_str().unwrap()]);
     assert!(stderr.contains("no .parquet results"), "{stderr}");
-}
-
-/// Processes whose command line mentions `needle`.
-pub fn processes_mentioning(needle: &str) -> Vec<String> {
-    std::fs::read_dir("/proc")
-        .unwrap()
-        .filter_map(|entry| std::fs::read(entry.ok()?.path().join("cmdline")).ok())
-        .map(|bytes| String::from_utf8_lossy(&bytes).replace('\0', " "))
-        .filter(|cmdline| cmdline.contains(needle))
-        .collect()
-}
-
-/// Starts `collide run MANIFEST --quiet --out OUT` in its own process group, waits until
-/// it has written one more results file into `OUT/STUDY`, then sends `signal` to the
-/// group as a terminal's Ctrl-C would (reaching it and not this test). Its output.
-pub fn interrupt_after_first_row(
-    manifest: &str,
-    out: &Path,
-    study: &str,
-    signal: rustix::process::Signal,
-) -> std::process::Output {
-    use std::os::unix::process::CommandExt;
-
-    let folder = out.join(study);
-    let count = || records::files_in(&folder).map_or(0, |files| files.len());
-    let before = count();
-    let child = std::process::Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args([
-            "run",
-            manifest,
-            "--quiet",
-            "--no-report",
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .process_group(0)
-        .spawn()
-        .unwrap();
-    let started = Instant::now();
-    while count() == before {
-        assert!(
-            started.elapsed() < Duration::from_secs(20),
-            "no results file appeared"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    std::thread::sleep(Duration::from_millis(300));
-    let group = rustix::process::Pid::from_raw(child.id() as i32).unwrap();
-    rustix::process::kill_process_group(group, signal).unwrap();
-    child.wait_with_output().unwrap()
 }
 
 #[test]
