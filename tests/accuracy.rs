@@ -9,11 +9,12 @@ use std::f64::consts::PI;
 use std::path::Path;
 
 use collide::backend::serial;
-use collide::scene_file::{self, Overrides};
+use collide::run::overrides::Overrides;
+use collide::run::scene_file;
+use collide::run::spec::{Method, MethodChoice, Observe, SceneSource};
 use collide::sim::event::{EventParams, EventSim};
 use collide::sim::scene::{GasSpec, Placement};
 use collide::sim::{Boundary, Particles, Physics, Scene};
-use collide::spec::{Method, MethodChoice, Observe, SceneSource};
 
 use crate::util::{
     collide as run_collide, json_summary, rayon_refuses, scene_file as write_scene,
@@ -315,7 +316,11 @@ fn a_collapsed_run_ends_early_with_status_ok_and_says_when() {
     assert_eq!((guarded.steps, guarded.time_reached), (100, Some(50.0)));
 }
 
-fn run_scene_text(text: &str, method: Method, observe: Observe) -> collide::summary::RunSummary {
+fn run_scene_text(
+    text: &str,
+    method: Method,
+    observe: Observe,
+) -> collide::run::summary::RunSummary {
     let overrides = Overrides {
         method: Some(MethodChoice::Fixed(method)),
         observe: Some(observe),

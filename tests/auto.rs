@@ -5,11 +5,12 @@
 
 use std::path::Path;
 
-use collide::auto::cost_rates;
 use collide::backend::serial;
-use collide::scene_file::{self, Overrides};
-use collide::spec::{Method, MethodChoice, Observe};
-use collide::summary::RunSummary;
+use collide::run::auto::cost_rates;
+use collide::run::overrides::Overrides;
+use collide::run::scene_file;
+use collide::run::spec::{Method, MethodChoice, Observe};
+use collide::run::summary::RunSummary;
 
 use crate::util::{rayon_refuses, three_in_a_row_text};
 

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use collide::records::{self, Record};
+use collide::study::records::{self, Record};
 use polars::prelude::{Column, DataFrame, ParquetWriter};
 
 use crate::util::{collide, scene_file};

@@ -4,7 +4,7 @@
 use std::os::unix::fs::PermissionsExt;
 use std::time::{Duration, Instant};
 
-use collide::records::{self, STATUS_TIMED_OUT};
+use collide::study::records::{self, STATUS_TIMED_OUT};
 
 use crate::util::{
     collide, interrupt_after_first_row, manifest, processes_mentioning, sample_records, scene_file,

@@ -5,9 +5,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-use collide::environment::Environment;
-use collide::records::{self, Record, RecordContext, STATUS_TIMED_OUT};
-use collide::summary::RunSummary;
+use collide::run::backend_kind::BackendKind;
+use collide::run::summary::RunSummary;
+use collide::study::environment::Environment;
+use collide::study::records::{self, Record, RecordContext, STATUS_TIMED_OUT};
 
 /// The scene of [`manifest`]: 200 disks, 20 steps.
 const SCENE: &str = "[scene]\nn = 200\npacking = 0.1\nseed = 3\n[method]\ndt = 0.1\nsteps = 20\n";
@@ -57,7 +58,7 @@ pub fn sample_records() -> Vec<Record> {
         config_key: "k",
         scene: "seed",
         scaling: "strong",
-        backend: "rayon",
+        backend: BackendKind::Rayon,
         workers: 2,
         repetition: 1,
         environment: &environment,

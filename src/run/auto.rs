@@ -6,12 +6,14 @@
 
 use std::borrow::Cow;
 
+use crate::run::spec::{
+    DEFAULT_DT_FRACTION, DtChoice, Method, MethodChoice, MethodSpec, SceneSource,
+};
 use crate::sim::Scene;
 use crate::sim::event::EventParams;
 use crate::sim::pilot::{StepPilot, event_pilot, step_pilot};
 use crate::sim::scene::{Extent, PlacementError};
 use crate::sim::step::auto_dt;
-use crate::spec::{DEFAULT_DT_FRACTION, DtChoice, Method, MethodChoice, MethodSpec, SceneSource};
 
 /// Default of `missed_tolerance`: 10⁻³ (also the accuracy study's failure line).
 pub const DEFAULT_MISSED_TOLERANCE: f64 = 1e-3;

@@ -5,8 +5,8 @@
 
 use serde::Deserialize;
 
-pub use crate::auto::DEFAULT_MISSED_TOLERANCE;
-use crate::auto::choose;
+pub use crate::run::auto::DEFAULT_MISSED_TOLERANCE;
+use crate::run::auto::choose;
 pub use crate::sim::engine::Method;
 use crate::sim::event::EventParams;
 use crate::sim::scene::{Extent, GasSpec, Placement, PlacementError, RSA_JAMMING_PACKING};
@@ -31,7 +31,7 @@ pub enum DtChoice {
         fraction: f64,
     },
     /// The largest dt whose pilot misses at most `missed_tolerance` of its collisions
-    /// (`dt = "auto"` without `dt_fraction`; see `crate::auto`).
+    /// (`dt = "auto"` without `dt_fraction`; see `crate::run::auto`).
     Tolerance,
 }
 
@@ -40,7 +40,7 @@ pub enum DtChoice {
 #[serde(try_from = "String")]
 pub enum MethodChoice {
     Fixed(Method),
-    /// `method = "auto"`: chosen by `crate::auto::choose`.
+    /// `method = "auto"`: chosen by `crate::run::auto::choose`.
     Auto,
 }
 
@@ -282,7 +282,7 @@ impl RunSpec {
     }
 
     /// Builds the initial disks (placing a random gas) and resolves the method and time
-    /// step (running the pilots of `crate::auto` when either is "auto").
+    /// step (running the pilots of `crate::run::auto` when either is "auto").
     pub fn prepare(&self) -> Result<PreparedRun, PlacementError> {
         let (scene, seed) = match &self.scene {
             SceneSource::Gas(gas) => (gas.build()?, Some(gas.seed)),

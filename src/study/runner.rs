@@ -16,13 +16,15 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::cli::BackendName;
-use crate::environment::Environment;
-use crate::manifest::{Configuration, SceneInput, Study};
-use crate::output::{remove_leftovers, write_atomically};
-use crate::process::{Ended, interrupt_note, run_with_timeout, tail};
-use crate::records::{self, Record, RecordContext, STATUS_FAILED, STATUS_OK, STATUS_TIMED_OUT};
-use crate::summary::RunSummary;
+use crate::run::backend_kind::BackendKind;
+use crate::run::summary::RunSummary;
+use crate::study::environment::Environment;
+use crate::study::manifest::{Configuration, SceneInput, Study};
+use crate::study::records::{
+    self, Record, RecordContext, STATUS_FAILED, STATUS_OK, STATUS_TIMED_OUT,
+};
+use crate::system::output::{remove_leftovers, write_atomically};
+use crate::system::process::{Ended, interrupt_note, run_with_timeout, tail};
 
 /// How to run a study.
 #[derive(Clone, Debug)]
@@ -58,7 +60,7 @@ pub fn run_study(
     options: &RunOptions,
 ) -> anyhow::Result<StudyOutcome> {
     // Ctrl-C stops the running child too; every finished repetition is already on disk.
-    crate::process::stop_children_on_interrupt();
+    crate::system::process::stop_children_on_interrupt();
     let quiet = options.quiet || !std::io::stdout().is_terminal();
     let note = |text: &str| {
         if !quiet {
@@ -123,7 +125,7 @@ pub fn run_study(
     let kept_ok = rows.len();
 
     for configuration in &configurations {
-        if configuration.backend != BackendName::Serial
+        if configuration.backend != BackendKind::Serial
             && configuration.workers > environment.usable_cpus
         {
             note(&format!(
@@ -136,7 +138,7 @@ pub fn run_study(
         }
     }
     for configuration in &configurations {
-        if let Some(placement) = crate::limits::placement_note(&configuration.footprint) {
+        if let Some(placement) = crate::run::limits::placement_note(&configuration.footprint) {
             note(&format!("{placement} ({}, every run)", configuration.key()));
         }
     }
@@ -216,7 +218,7 @@ pub fn run_study(
             config_key: &key,
             scene: &configuration.scene,
             scaling: study.scaling.name(),
-            backend: configuration.backend_name(),
+            backend: configuration.backend,
             workers: configuration.workers as u64,
             repetition: rep,
             environment: &environment,
@@ -238,7 +240,7 @@ pub fn run_study(
     }
     progress.finish_and_clear();
     if !todo.is_empty() {
-        let end = crate::environment::load_average();
+        let end = crate::study::environment::load_average();
         for row in rows.iter_mut().skip(kept_ok) {
             row.load_average_end = end;
         }
@@ -296,8 +298,8 @@ fn record_of(
     }
 }
 
-/// What `collide calibrate` prints: one JSON object, the times of
-/// [`crate::calibrate::workload_seconds`].
+/// What `collide calibrate` prints: one JSON object, the wall and CPU seconds of the
+/// calibration workload of `collide check`.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
 pub struct Calibration {
     /// Wall seconds.
@@ -319,7 +321,7 @@ fn runnable(study: &Study) -> anyhow::Result<Vec<&Configuration>> {
         return Ok(configurations);
     }
     let before = configurations.len();
-    configurations.retain(|c| c.backend != BackendName::Mpi);
+    configurations.retain(|c| c.backend != BackendKind::Mpi);
     let skipped = before - configurations.len();
     if configurations.is_empty() {
         bail!(
@@ -368,7 +370,7 @@ fn hold_folder(dir: &Path) -> anyhow::Result<File> {
         Err(TryLockError::Error(err)) => eprintln!(
             "warning: cannot lock the results folder {} ({}); do not run two studies into it at once",
             dir.display(),
-            crate::output::io_reason(&err)
+            crate::system::output::io_reason(&err)
         ),
     }
     Ok(folder)

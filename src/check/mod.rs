@@ -5,6 +5,8 @@
 //! `--update-baseline`. Verdicts come from `stats`; instruction counts of the serial path
 //! under callgrind, where valgrind is installed, are a second, noise-free signal.
 
+pub mod calibrate;
+
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -13,15 +15,15 @@ use std::process::Command;
 use anyhow::{Context, bail};
 use serde::{Deserialize, Serialize};
 
-use crate::cli::BackendName;
-use crate::environment::Environment;
 use crate::exit::RunsFailed;
-use crate::manifest::{self, Configuration};
-use crate::output::write_atomically;
-use crate::records::{self, Record, STATUS_OK};
-use crate::results::median;
-use crate::runner::{self, Calibration, RunOptions};
+use crate::run::backend_kind::BackendKind;
+use crate::stats::median;
 use crate::stats::{self, Interval, Verdict};
+use crate::study::environment::Environment;
+use crate::study::manifest::{self, Configuration};
+use crate::study::records::{self, Record, STATUS_OK};
+use crate::study::runner::{self, Calibration, RunOptions};
+use crate::system::output::write_atomically;
 
 /// How to run a check.
 #[derive(Clone, Debug)]
@@ -166,7 +168,7 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
     let serial = study
         .configurations
         .iter()
-        .find(|c| c.backend == BackendName::Serial);
+        .find(|c| c.backend == BackendKind::Serial);
     let instructions = match serial {
         Some(configuration) => count_instructions(
             configuration,
@@ -469,7 +471,7 @@ fn count_instructions(
         _ => bail!(
             "callgrind of `collide {}` failed{}",
             command.join(" "),
-            crate::process::tail("its output", &stderr)
+            crate::system::process::tail("its output", &stderr)
         ),
     }
 }

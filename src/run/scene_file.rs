@@ -9,43 +9,18 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::scene_limits::{self, Field};
+use crate::run::overrides::{DtValue, Overrides};
+use crate::run::scene_limits::{self, Field};
+use crate::run::spec::{
+    DEFAULT_DT_FRACTION, DEFAULT_MISSED_TOLERANCE, DtChoice, InjectedSlowdown, Method,
+    MethodChoice, MethodSpec, Observe, RunSpec, SceneSource,
+};
 use crate::sim::grid::StripGrid;
 use crate::sim::scene::{
     Extent, GasSpec, MassRule, Placement, RSA_JAMMING_PACKING, RadiusDistribution,
     check_periodic_box,
 };
 use crate::sim::{Boundary, Broadphase, Disk, Domain, Particles, Physics, Scene};
-use crate::spec::{
-    DEFAULT_DT_FRACTION, DEFAULT_MISSED_TOLERANCE, DtChoice, InjectedSlowdown, Method,
-    MethodChoice, MethodSpec, Observe, RunSpec, SceneSource,
-};
-
-/// Values given on the command line that replace the scene file's.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Overrides {
-    pub n: Option<i64>,
-    pub steps: Option<i64>,
-    pub seed: Option<u64>,
-    pub dt: Option<DtValue>,
-    pub packing: Option<f64>,
-    pub broadphase: Option<Broadphase>,
-    pub method: Option<MethodChoice>,
-    pub observe: Option<Observe>,
-    /// TC model time of the event method (0: guard off).
-    pub tc: Option<f64>,
-}
-
-/// A time step as written: a number or the word "auto".
-#[derive(Clone, Debug, PartialEq, Deserialize)]
-#[serde(
-    untagged,
-    expecting = "expected a time step: a number such as 0.01, or \"auto\""
-)]
-pub enum DtValue {
-    Seconds(f64),
-    Word(String),
-}
 
 #[derive(Debug, thiserror::Error)]
 pub enum SceneFileError {
