@@ -10,7 +10,7 @@ use crate::stats::median;
 use crate::study::records::{Record, STATUS_OK};
 
 /// A missed-collision fraction above this is a failed step (the stability map's boundary;
-/// the default tolerance of `dt = "auto"`, [`crate::run::auto::DEFAULT_MISSED_TOLERANCE`]).
+/// the default tolerance of `dt = "auto"`, [`crate::run::spec::DEFAULT_MISSED_TOLERANCE`]).
 pub const FAILURE_MISSED_FRACTION: f64 = 1e-3;
 
 /// A run whose disks went deeper into a wall than this fraction of their radius is

@@ -15,9 +15,6 @@ use crate::sim::pilot::{StepPilot, event_pilot, step_pilot};
 use crate::sim::scene::{Extent, PlacementError};
 use crate::sim::step::auto_dt;
 
-/// Default of `missed_tolerance`: 10⁻³ (also the accuracy study's failure line).
-pub const DEFAULT_MISSED_TOLERANCE: f64 = 1e-3;
-
 /// The dt fractions tried, largest first: v_max·dt = f·r_min for f = 4, 2, 1, ½, … 1/128.
 const LADDER_TOP: f64 = 4.0;
 const LADDER_RUNGS: i32 = 10;

@@ -80,8 +80,11 @@ pub struct SweptList {
     pub offset: usize,
     pub len: usize,
     /// Sets the override to the list's element i.
-    pub set: Box<dyn Fn(&mut Overrides, usize)>,
+    pub set: Setter,
 }
+
+/// Sets an override to element i of its swept list.
+pub type Setter = Box<dyn Fn(&mut Overrides, usize)>;
 
 /// Declares the overrides: the first group is always part of a configuration's key (`-`
 /// when unset), the second joins it only when set (so the keys of manifests written

@@ -151,36 +151,36 @@ impl Record {
 
 /// A column's value from the JSON summary's field of the same name: a count widened to
 /// u64, a missing number NaN, missing text "", a curve as JSON text.
-trait IntoCell<T> {
-    fn into_cell(&self) -> T;
+trait ToCell<T> {
+    fn to_cell(&self) -> T;
 }
 
-impl IntoCell<u64> for usize {
-    fn into_cell(&self) -> u64 {
+impl ToCell<u64> for usize {
+    fn to_cell(&self) -> u64 {
         *self as u64
     }
 }
 
-impl<T: Clone> IntoCell<T> for T {
-    fn into_cell(&self) -> T {
+impl<T: Clone> ToCell<T> for T {
+    fn to_cell(&self) -> T {
         self.clone()
     }
 }
 
-impl IntoCell<f64> for Option<f64> {
-    fn into_cell(&self) -> f64 {
+impl ToCell<f64> for Option<f64> {
+    fn to_cell(&self) -> f64 {
         self.unwrap_or(f64::NAN)
     }
 }
 
-impl IntoCell<String> for Option<String> {
-    fn into_cell(&self) -> String {
+impl ToCell<String> for Option<String> {
+    fn to_cell(&self) -> String {
         self.clone().unwrap_or_default()
     }
 }
 
-impl IntoCell<String> for Option<Vec<[f64; 2]>> {
-    fn into_cell(&self) -> String {
+impl ToCell<String> for Option<Vec<[f64; 2]>> {
+    fn to_cell(&self) -> String {
         self.as_ref()
             .and_then(|curve| serde_json::to_string(curve).ok())
             .unwrap_or_default()
@@ -294,7 +294,7 @@ fn civil_from_days(days: i64) -> (i64, u32, u32) {
 /// grouped by type. [`Record`] is declared from it, and so are writing, reading and the
 /// blank row. A column marked `<- run` is the JSON summary's field of the same name
 /// ([`RunSummary`], where its meaning and unit are documented), copied by
-/// [`Record::measured`] through [`IntoCell`]; docs/records.md documents every column.
+/// [`Record::measured`] through [`ToCell`]; docs/records.md documents every column.
 macro_rules! for_each_column {
     ($apply:ident) => {
         $apply! {
@@ -349,7 +349,7 @@ macro_rules! declare_record {
             fn copy_run(&mut self, summary: &RunSummary) {
                 $($($(
                     let _ = stringify!($from); // only the columns marked `<- run`
-                    self.$name = summary.$name.into_cell();
+                    self.$name = summary.$name.to_cell();
                 )?)*)*
             }
         }
