@@ -12,10 +12,9 @@ use collide::run::limits::{MAX_WORKERS_PER_CORE, Machine};
 use collide::study::records;
 use rustix::process::Signal;
 
-use crate::util::interrupt_after_first_row;
-use crate::util::{collide, scene_file};
-
-const SCENE: &str = "[scene]\nn = 200\npacking = 0.1\nseed = 3\n[method]\ndt = 0.1\nsteps = 20\n";
+use crate::util::{
+    SCENE, collide, interrupt_after_first_row, run_study, scene_file, study_command,
+};
 
 /// An inline scene entry named `name` (TOML-escaped by the caller).
 fn inline_scene(name: &str) -> String {
@@ -342,16 +341,8 @@ fn worker_counts_above_the_ceiling_are_refused_unless_insisted_on() {
 }
 
 fn spawn_study(manifest: &str, out: &Path) -> std::process::Child {
-    Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args([
-            "run",
-            manifest,
-            "--quiet",
-            "--no-report",
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
+    study_command(manifest, out)
+        .arg("--quiet")
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -453,21 +444,7 @@ fn unfinished_files_of_a_killed_study_are_never_results_and_are_removed_next_tim
         inline_scene("gas")
     );
     let manifest = scene_file(dir.path(), "tiny.toml", &text);
-    let run = |extra: &[&str]| {
-        collide(
-            &[
-                &[
-                    "run",
-                    manifest.to_str().unwrap(),
-                    "--no-report",
-                    "--out",
-                    out.to_str().unwrap(),
-                ],
-                extra,
-            ]
-            .concat(),
-        )
-    };
+    let run = |extra: &[&str]| run_study(manifest.to_str().unwrap(), &out, extra);
     assert!(run(&[]).status.success());
     let study = out.join("tiny");
     let results = records::files_in(&study).unwrap();

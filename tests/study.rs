@@ -7,7 +7,8 @@ use std::time::{Duration, Instant};
 use collide::study::records::{self, STATUS_TIMED_OUT};
 
 use crate::util::{
-    collide, interrupt_after_first_row, manifest, processes_mentioning, sample_records, scene_file,
+    collide, interrupt_after_first_row, manifest, processes_mentioning, run_study, sample_records,
+    scene_file,
 };
 
 const BACKENDS: &str = "[backends]\nserial = true\nrayon = [2]\n";
@@ -82,21 +83,7 @@ fn a_study_records_every_repetition_and_resume_runs_only_what_is_missing() {
         dir.path(),
         &format!("repetitions = 2\nwarmups = 0\n{BACKENDS}"),
     );
-    let run = |extra: &[&str]| {
-        collide(
-            &[
-                &[
-                    "run",
-                    path.as_str(),
-                    "--out",
-                    out.to_str().unwrap(),
-                    "--no-report",
-                ],
-                extra,
-            ]
-            .concat(),
-        )
-    };
+    let run = |extra: &[&str]| run_study(&path, &out, extra);
     assert!(run(&[]).status.success());
     let parquet = records::files_in(&out.join("tiny")).unwrap();
     assert_eq!(parquet.len(), 1, "{parquet:?}");
@@ -161,7 +148,7 @@ fn an_accuracy_study_runs_both_methods_and_reports_pareto_and_stability_figures(
          observe = [\"accuracy\", \"accuracy\", \"timing\"]\n\
          zip = [\"dt\", \"steps\", \"method\", \"observe\"]\n[backends]\nserial = true\n",
     );
-    let run = collide(&["run", &path, "--out", out.to_str().unwrap(), "--no-report"]);
+    let run = run_study(&path, &out, &[]);
     assert!(
         run.status.success(),
         "{}",
@@ -212,7 +199,7 @@ fn a_run_over_its_timeout_is_recorded_as_timed_out_and_fails_the_study() {
         "repetitions = 1\nwarmups = 0\ntimeout_s = 0.2\n[sweep]\nsteps = [10000000]\n\
          [backends]\nserial = true\n",
     );
-    let result = collide(&["run", &path, "--out", out.to_str().unwrap(), "--no-report"]);
+    let result = run_study(&path, &out, &[]);
     assert!(!result.status.success());
     let stderr = String::from_utf8(result.stderr).unwrap();
     assert!(stderr.contains("1 run(s) failed"), "{stderr}");
@@ -290,7 +277,7 @@ fn a_study_of_mpi_configurations_only_is_an_error_without_mpi() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("results");
     let path = manifest(dir.path(), "[backends]\nmpi = [1, 2]\n");
-    let run = collide(&["run", &path, "--out", out.to_str().unwrap(), "--no-report"]);
+    let run = run_study(&path, &out, &[]);
     assert_eq!(run.status.code(), Some(2));
     let stderr = String::from_utf8(run.stderr).unwrap();
     for fragment in [

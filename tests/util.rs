@@ -11,7 +11,8 @@ use collide::study::environment::Environment;
 use collide::study::records::{self, Record, RecordContext, STATUS_TIMED_OUT};
 
 /// The scene of [`manifest`]: 200 disks, 20 steps.
-const SCENE: &str = "[scene]\nn = 200\npacking = 0.1\nseed = 3\n[method]\ndt = 0.1\nsteps = 20\n";
+pub const SCENE: &str =
+    "[scene]\nn = 200\npacking = 0.1\nseed = 3\n[method]\ndt = 0.1\nsteps = 20\n";
 
 /// Runs the `collide` binary from the crate folder and waits for its output.
 pub fn collide(args: &[&str]) -> Output {
@@ -36,6 +37,29 @@ pub fn scene_file(dir: &Path, name: &str, text: &str) -> PathBuf {
     let path = dir.join(name);
     std::fs::write(&path, text).unwrap();
     path
+}
+
+/// `collide run MANIFEST --out OUT --no-report`, not started yet.
+pub fn study_command(manifest: &str, out: &Path) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_collide"));
+    command
+        .args([
+            "run",
+            manifest,
+            "--out",
+            out.to_str().unwrap(),
+            "--no-report",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"));
+    command
+}
+
+/// `collide run MANIFEST --out OUT --no-report EXTRA...`, waited for.
+pub fn run_study(manifest: &str, out: &Path, extra: &[&str]) -> Output {
+    study_command(manifest, out)
+        .args(extra)
+        .output()
+        .expect("the collide binary runs")
 }
 
 /// A manifest over `scene.toml` (written beside it) with the given extra text.
@@ -102,16 +126,8 @@ pub fn interrupt_after_first_row(
     let folder = out.join(study);
     let count = || records::files_in(&folder).map_or(0, |files| files.len());
     let before = count();
-    let child = std::process::Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args([
-            "run",
-            manifest,
-            "--quiet",
-            "--no-report",
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
+    let child = study_command(manifest, out)
+        .arg("--quiet")
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .process_group(0)
