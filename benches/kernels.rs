@@ -28,11 +28,11 @@ use criterion::{BenchmarkId, Criterion, Throughput, criterion_group};
 use collide::backend::comm::ThreadComm;
 use collide::backend::distributed;
 use collide::backend::threads::ThreadedStepper;
-use collide::backend::{CpuScope, cpu_seconds};
+use collide::run::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
 use collide::sim::event::{EventParams, EventSim};
 use collide::sim::scene::GasSpec;
 use collide::sim::{Boundary, Broadphase, Particles, Scene, StepParams, Stepper};
-use collide::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
+use collide::system::machine::{CpuScope, cpu_seconds};
 
 mod yardstick;
 use yardstick::CellListYardstick;
@@ -156,7 +156,7 @@ fn backend_steps(c: &mut Criterion) {
     group.finish();
 }
 
-/// The cost model of `method = "auto"` (`collide::auto::MEASURED`): both methods on the
+/// The cost model of `method = "auto"` (`collide::run::auto::MEASURED`): both methods on the
 /// same periodic gases of unit disks at N = 10⁴, 10⁵ and 10⁶, packing 0.05 and 0.3, in
 /// one run. `step/…` is one serial step (elem/s: particle-steps per second); `event/n…`
 /// processes a fixed number of collisions (pair and wall) after a warm-up of one

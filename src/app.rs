@@ -7,24 +7,27 @@ use std::path::Path;
 use anyhow::{Context, bail};
 
 use crate::backend::{BackendSpec, RunOutcome, serial, threads};
+use crate::check::calibrate;
 use crate::check::{CheckOptions, CheckOutcome};
 use crate::cli::{
-    BackendName, CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs, ViewArgs,
+    CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs, ViewArgs,
 };
 use crate::exit::RunsFailed;
-use crate::limits::{Machine, WorkerSource, check_memory, check_workers, placement_note};
-use crate::output::{check_output_file, write_atomically, write_state_csv};
-use crate::records::{self, Record, STATUS_OK};
-use crate::runner::{Calibration, RunOptions};
-use crate::scene_file;
-use crate::spec::InjectedSlowdown;
+use crate::report::figures::{self, cooling::Cooling, scaling};
+use crate::report::{accuracy, analysis, markdown, tables as results};
+use crate::run::backend_kind::BackendKind;
+use crate::run::limits::{Machine, WorkerSource, check_memory, check_workers, placement_note};
+use crate::run::scene_file;
+use crate::run::spec::InjectedSlowdown;
 #[cfg(feature = "mpi")]
-use crate::summary::RunSummary;
+use crate::run::summary::RunSummary;
+use crate::study::records::{self, Record, STATUS_OK};
+use crate::study::runner::{Calibration, RunOptions};
+use crate::study::{manifest, runner};
+use crate::system::output::{check_output_file, write_atomically, write_state_csv};
+use crate::view::render;
 use crate::view::window::ViewOptions;
-use crate::{
-    accuracy, accuracy_figures, analysis, calibrate, check, figures, manifest, render, report,
-    results, runner, view,
-};
+use crate::{check, view};
 
 /// How a command that did its job ended: `main` maps this to the exit code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -86,7 +89,7 @@ fn render_scene(args: &RenderArgs) -> anyhow::Result<()> {
             check_output_file(path, flag)?;
         }
     }
-    let spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
+    let spec = scene_file::load(&args.scene, &args.overrides)?;
     check_fits(&args.scene, &spec, 1, &Machine::this())?;
     let prepared = spec
         .prepare()
@@ -113,7 +116,7 @@ fn render_scene(args: &RenderArgs) -> anyhow::Result<()> {
 }
 
 fn view_scene(args: &ViewArgs) -> anyhow::Result<()> {
-    let spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
+    let spec = scene_file::load(&args.scene, &args.overrides)?;
     if spec.method.method.may_be_event() && args.threads.is_some() {
         bail!(
             "{}: the event method (which method auto may choose) runs on the serial backend \
@@ -152,7 +155,7 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
         Some(out) => out.clone(),
         None => {
             // The name comes from a file, which anyone may have written.
-            crate::names::check_name(study).map_err(|reason| {
+            crate::study::names::check_name(study).map_err(|reason| {
                 anyhow::anyhow!(
                     "{}: the study name {reason}; choose the report folder with --out",
                     args.path.display()
@@ -176,16 +179,15 @@ fn report_into(records: &[Record], source: &Path, out: &Path) -> anyhow::Result<
     let setups = analysis::analyse(records)?;
     let accuracy = if accuracy::is_accuracy_study(records) {
         let groups = accuracy::analyse(records);
-        let (pareto, stability) = accuracy_figures::draw(&groups, out)?;
-        let figures = [pareto, stability]
+        let figures = figures::accuracy_charts(&groups)
             .iter()
-            .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-            .collect();
+            .map(|chart| figures::write(chart.as_ref(), out).map(|_| chart.file_name()))
+            .collect::<anyhow::Result<_>>()?;
         let cooling = accuracy::cooling(records);
         if !cooling.is_empty() {
-            accuracy_figures::draw_cooling(&cooling, out)?;
+            figures::write(&Cooling(&cooling), out)?;
         }
-        Some(report::AccuracySection {
+        Some(markdown::AccuracySection {
             groups,
             figures,
             cooling,
@@ -193,7 +195,7 @@ fn report_into(records: &[Record], source: &Path, out: &Path) -> anyhow::Result<
     } else {
         None
     };
-    let mut pictures = report::Pictures {
+    let mut pictures = markdown::Pictures {
         figures: Vec::with_capacity(setups.len()),
         scene: out
             .join(SCENE_PICTURE)
@@ -207,7 +209,7 @@ fn report_into(records: &[Record], source: &Path, out: &Path) -> anyhow::Result<
             pictures.figures.push(Vec::new());
             continue;
         }
-        let drawn = figures::draw_setup(setup, out, &format!("setup-{}", index + 1))?;
+        let drawn = scaling::draw_setup(setup, out, &format!("setup-{}", index + 1))?;
         let names = drawn
             .into_iter()
             .map(|(figure, path)| {
@@ -218,7 +220,7 @@ fn report_into(records: &[Record], source: &Path, out: &Path) -> anyhow::Result<
         pictures.figures.push(names);
     }
     let path = out.join("report.md");
-    let text = report::markdown(records, &setups, &source.display().to_string(), &pictures);
+    let text = markdown::markdown(records, &setups, &source.display().to_string(), &pictures);
     write_atomically(&path, |file| file.write_all(text.as_bytes()))?;
     println!(
         "report written to {}, its figures beside it",
@@ -279,7 +281,7 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.dump {
         check_output_file(path, "--dump")?;
     }
-    let mut spec = scene_file::load(&args.scene, &args.overrides.overrides())?;
+    let mut spec = scene_file::load(&args.scene, &args.overrides)?;
     // Every rank of an MPI run builds all the disks.
     let copies = match backend {
         BackendSpec::Mpi { ranks } => ranks.map_or_else(usable_cpus, NonZeroUsize::get),
@@ -330,7 +332,7 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
 /// Refuses a run whose memory cannot fit the machine, and announces a long placement.
 fn check_fits(
     scene: &std::path::Path,
-    spec: &crate::spec::RunSpec,
+    spec: &crate::run::spec::RunSpec,
     copies: usize,
     machine: &Machine,
 ) -> anyhow::Result<()> {
@@ -358,7 +360,7 @@ enum Finished {
 #[cfg(feature = "mpi")]
 fn run_mpi(
     args: &SimulateArgs,
-    spec: &crate::spec::RunSpec,
+    spec: &crate::run::spec::RunSpec,
     ranks: Option<NonZeroUsize>,
 ) -> anyhow::Result<Finished> {
     use crate::backend::{launcher, mpi};
@@ -384,7 +386,7 @@ fn run_mpi(
 #[cfg(not(feature = "mpi"))]
 fn run_mpi(
     _: &SimulateArgs,
-    _: &crate::spec::RunSpec,
+    _: &crate::run::spec::RunSpec,
     _: Option<NonZeroUsize>,
 ) -> anyhow::Result<Finished> {
     bail!(
@@ -395,17 +397,17 @@ fn run_mpi(
 
 /// The default worker count: the CPUs this process may run on.
 fn usable_cpus() -> usize {
-    crate::backend::usable_cpus()
+    crate::system::machine::usable_cpus()
 }
 
 /// The backend the flags ask for; worker counts only go with the backend they count, and
 /// stay under the machine's ceiling unless `--oversubscribe` insists.
 fn backend_spec(args: &SimulateArgs, machine: &Machine) -> anyhow::Result<BackendSpec> {
     let name = args.backend;
-    if args.threads.is_some() && name != BackendName::Rayon {
+    if args.threads.is_some() && name != BackendKind::Rayon {
         bail!("--threads sets the rayon pool size; add `--backend rayon` or drop --threads");
     }
-    if args.ranks.is_some() && name != BackendName::Mpi {
+    if args.ranks.is_some() && name != BackendKind::Mpi {
         bail!("--ranks sets the MPI process count; add `--backend mpi` or drop --ranks");
     }
     for (flag, workers) in [("--threads", args.threads), ("--ranks", args.ranks)] {
@@ -419,12 +421,12 @@ fn backend_spec(args: &SimulateArgs, machine: &Machine) -> anyhow::Result<Backen
         }
     }
     Ok(match name {
-        BackendName::Serial => BackendSpec::Serial,
-        BackendName::Rayon => BackendSpec::Rayon {
+        BackendKind::Serial => BackendSpec::Serial,
+        BackendKind::Rayon => BackendSpec::Rayon {
             threads: args
                 .threads
                 .unwrap_or_else(|| NonZeroUsize::new(usable_cpus()).unwrap_or(NonZeroUsize::MIN)),
         },
-        BackendName::Mpi => BackendSpec::Mpi { ranks: args.ranks },
+        BackendKind::Mpi => BackendSpec::Mpi { ranks: args.ranks },
     })
 }

@@ -3,11 +3,10 @@
 use std::num::NonZeroUsize;
 use std::path::PathBuf;
 
-use clap::{Args, Parser, Subcommand, ValueEnum};
+use clap::{Args, Parser, Subcommand};
 
-use crate::scene_file::{DtValue, Overrides};
-use crate::sim::Broadphase;
-use crate::spec::{MethodChoice, Observe};
+use crate::run::backend_kind::BackendKind;
+use crate::run::overrides::Overrides;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -164,7 +163,7 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(2..=1000))]
     pub frames: u32,
     #[command(flatten)]
-    pub overrides: OverrideArgs,
+    pub overrides: Overrides,
 }
 
 #[derive(Debug, Args)]
@@ -193,7 +192,7 @@ pub struct ViewArgs {
     #[arg(long, value_name = "STEPS", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     pub steps_per_frame: u64,
     #[command(flatten)]
-    pub overrides: OverrideArgs,
+    pub overrides: Overrides,
 }
 
 #[derive(Debug, Args)]
@@ -243,10 +242,10 @@ pub struct SimulateArgs {
     #[arg(long, value_name = "FILE")]
     pub dump: Option<PathBuf>,
     #[command(flatten)]
-    pub overrides: OverrideArgs,
+    pub overrides: Overrides,
     /// How to run the steps: serial (the reference), rayon (threads) or mpi (ranks).
-    #[arg(long, value_enum, default_value_t = BackendName::Serial)]
-    pub backend: BackendName,
+    #[arg(long, value_enum, default_value_t = BackendKind::Serial)]
+    pub backend: BackendKind,
     /// Threads of the rayon pool (with --backend rayon; default: the logical cores).
     #[arg(long, value_parser = parse_workers)]
     pub threads: Option<NonZeroUsize>,
@@ -267,84 +266,6 @@ pub struct SimulateArgs {
     /// Add this fraction of extra work to every step (testing `collide check` only).
     #[arg(long, value_name = "FRACTION", default_value_t = 0.0, value_parser = parse_fraction, hide = true)]
     pub inject_slowdown: f64,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum BackendName {
-    Serial,
-    Rayon,
-    Mpi,
-}
-
-impl BackendName {
-    pub fn name(self) -> &'static str {
-        match self {
-            BackendName::Serial => "serial",
-            BackendName::Rayon => "rayon",
-            BackendName::Mpi => "mpi",
-        }
-    }
-}
-
-/// Flags that replace a scene file's values.
-#[derive(Debug, Args)]
-pub struct OverrideArgs {
-    /// Number of disks (random scenes).
-    #[arg(long, allow_hyphen_values = true)]
-    pub n: Option<i64>,
-    /// Number of steps.
-    #[arg(long, allow_hyphen_values = true)]
-    pub steps: Option<i64>,
-    /// Seed of the random initial state.
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// Time step, or "auto".
-    #[arg(long, value_parser = parse_dt, allow_hyphen_values = true)]
-    pub dt: Option<DtValue>,
-    /// Area fraction of disks (random scenes; the box becomes square).
-    #[arg(long, allow_hyphen_values = true)]
-    pub packing: Option<f64>,
-    /// Broad phase: grid (default) or allpairs (the seed's O(N²) search).
-    #[arg(long, value_parser = parse_broadphase)]
-    pub broadphase: Option<Broadphase>,
-    /// Method: step (time steps of dt, the default), event (the exact event-driven
-    /// reference; serial backend only) or auto (the cheaper one within the scene's
-    /// missed_tolerance; serial backend only).
-    #[arg(long, value_parser = parse_method)]
-    pub method: Option<MethodChoice>,
-    /// What to measure besides time: timing (default) or accuracy (also the step
-    /// method's exact missed-collision count, outside `wall_s`; serial backend only).
-    #[arg(long, value_parser = parse_observe)]
-    pub observe: Option<Observe>,
-    /// TC model time of the event method's inelastic-collapse guard (0 turns it off;
-    /// default 1e-4 · r_min / v_rms).
-    #[arg(long, allow_hyphen_values = true)]
-    pub tc: Option<f64>,
-}
-
-impl OverrideArgs {
-    pub fn overrides(&self) -> Overrides {
-        Overrides {
-            n: self.n,
-            steps: self.steps,
-            seed: self.seed,
-            dt: self.dt.clone(),
-            packing: self.packing,
-            broadphase: self.broadphase,
-            method: self.method,
-            observe: self.observe,
-            tc: self.tc,
-        }
-    }
-}
-
-fn parse_dt(text: &str) -> Result<DtValue, String> {
-    if text == "auto" {
-        return Ok(DtValue::Word(text.to_owned()));
-    }
-    text.parse::<f64>()
-        .map(DtValue::Seconds)
-        .map_err(|_| format!("expected a number or \"auto\", got \"{text}\""))
 }
 
 fn parse_workers(text: &str) -> Result<NonZeroUsize, String> {
@@ -377,26 +298,6 @@ fn parse_fraction(text: &str) -> Result<f64, String> {
         _ => Err(format!(
             "expected a fraction of 0 or more (0.25 = 25%), got \"{text}\""
         )),
-    }
-}
-
-fn parse_broadphase(text: &str) -> Result<Broadphase, String> {
-    match text {
-        "grid" => Ok(Broadphase::Grid),
-        "allpairs" => Ok(Broadphase::AllPairs),
-        _ => Err(format!("expected grid or allpairs, got \"{text}\"")),
-    }
-}
-
-fn parse_method(text: &str) -> Result<MethodChoice, String> {
-    text.parse()
-}
-
-fn parse_observe(text: &str) -> Result<Observe, String> {
-    match text {
-        "timing" => Ok(Observe::Timing),
-        "accuracy" => Ok(Observe::Accuracy),
-        _ => Err(format!("expected timing or accuracy, got \"{text}\"")),
     }
 }
 

@@ -1,12 +1,11 @@
-//! Statistics of the timing check: a seeded bootstrap confidence interval of the ratio
-//! of two medians, and the verdict as a pure function of that interval and a noise
+//! Pure statistics: the median (the tables, the accuracy analysis and the timing check
+//! all summarise repetitions by it), a seeded bootstrap confidence interval of the ratio
+//! of two medians, and the timing check's verdict as a pure function of that interval and a noise
 //! threshold (criterion.rs' `compare_to_threshold`). No I/O and no clock: the same
 //! numbers give the same answer.
 
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
-
-use crate::results::median;
 
 /// A confidence interval around a point estimate: `lower <= point <= upper` for
 /// the ratios this module computes.
@@ -45,6 +44,17 @@ pub fn verdict(ratio: &Interval, noise: f64) -> Verdict {
         Verdict::Improved
     } else {
         Verdict::Unchanged
+    }
+}
+
+/// Median of a non-empty slice.
+pub fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let mid = values.len() / 2;
+    if values.len() % 2 == 1 {
+        values[mid]
+    } else {
+        0.5 * (values[mid - 1] + values[mid])
     }
 }
 

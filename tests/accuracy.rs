@@ -9,13 +9,17 @@ use std::f64::consts::PI;
 use std::path::Path;
 
 use collide::backend::serial;
-use collide::scene_file::{self, Overrides};
+use collide::run::overrides::Overrides;
+use collide::run::scene_file;
+use collide::run::spec::{Method, MethodChoice, Observe, SceneSource};
 use collide::sim::event::{EventParams, EventSim};
 use collide::sim::scene::{GasSpec, Placement};
 use collide::sim::{Boundary, Particles, Physics, Scene};
-use collide::spec::{Method, MethodChoice, Observe, SceneSource};
 
-use crate::cli::{collide as run_collide, json_summary, scene_file as write_scene};
+use crate::util::{
+    collide as run_collide, json_summary, rayon_refuses, scene_file as write_scene,
+    three_in_a_row_text,
+};
 
 /// A periodic gas of unit disks (r = 1, m = 1, v_rms = 1, so T = 0.5) at packing `eta`.
 fn periodic_gas(n: usize, eta: f64, restitution: f64, seed: u64) -> Scene {
@@ -190,19 +194,6 @@ fn inelastic_gas_cools_by_haffs_law_early_on() {
     assert_eq!(sim.collapse_time(), None);
 }
 
-/// Three unit disks on one line in a 100 × 100 walled box, the outer two closing in on
-/// the middle one (off centre, so no two collisions coincide), at restitution `e`: 100
-/// intervals of 0.5 of the event method.
-pub fn three_in_a_row_text(e: f64) -> String {
-    format!(
-        "[scene]\nsize = [100.0, 100.0]\nrestitution = {e}\n\
-         [[scene.particle]]\nx = 40.0\ny = 50.0\nvx = 1.0\n\
-         [[scene.particle]]\nx = 49.0\ny = 50.0\n\
-         [[scene.particle]]\nx = 60.0\ny = 50.0\nvx = -1.0\n\
-         [method]\nmethod = \"event\"\ndt = 0.5\nsteps = 100\n"
-    )
-}
-
 /// The three disks of [`three_in_a_row_text`] in an event simulation with TC time `tc`.
 fn three_in_a_row(e: f64, tc: f64) -> (EventSim, Particles) {
     let text = three_in_a_row_text(e);
@@ -325,7 +316,11 @@ fn a_collapsed_run_ends_early_with_status_ok_and_says_when() {
     assert_eq!((guarded.steps, guarded.time_reached), (100, Some(50.0)));
 }
 
-fn run_scene_text(text: &str, method: Method, observe: Observe) -> collide::summary::RunSummary {
+fn run_scene_text(
+    text: &str,
+    method: Method,
+    observe: Observe,
+) -> collide::run::summary::RunSummary {
     let overrides = Overrides {
         method: Some(MethodChoice::Fixed(method)),
         observe: Some(observe),
@@ -441,24 +436,6 @@ fn the_event_method_refuses_gravity_and_parallel_backends_with_clear_errors() {
         "{stderr}"
     );
     rayon_refuses("event");
-}
-
-/// `--method method` with the rayon backend is an input error: the event method (which
-/// `auto` may choose) is serial only.
-pub fn rayon_refuses(method: &str) {
-    let out = run_collide(&[
-        "simulate",
-        "experiments/scenes/seed-1000.toml",
-        "--method",
-        method,
-        "--backend",
-        "rayon",
-        "--threads",
-        "2",
-    ]);
-    assert_eq!(out.status.code(), Some(2));
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("serial backend only"), "{stderr}");
 }
 
 /// The JSON summary of 50 steps of the seed scene with more flags.

@@ -5,13 +5,14 @@
 
 use std::path::Path;
 
-use collide::auto::cost_rates;
 use collide::backend::serial;
-use collide::scene_file::{self, Overrides};
-use collide::spec::{Method, MethodChoice, Observe};
-use collide::summary::RunSummary;
+use collide::run::auto::cost_rates;
+use collide::run::overrides::Overrides;
+use collide::run::scene_file;
+use collide::run::spec::{Method, MethodChoice, Observe};
+use collide::run::summary::RunSummary;
 
-use crate::accuracy::{rayon_refuses, three_in_a_row_text};
+use crate::util::{rayon_refuses, three_in_a_row_text};
 
 /// A periodic gas of 2000 unit disks (r = m = v_rms = 1) at `packing`, with `method` lines.
 fn gas(packing: f64, extra: &str) -> String {

@@ -3,9 +3,9 @@
 use std::num::NonZeroUsize;
 
 use collide::backend::{serial, threads};
+use collide::run::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
 use collide::sim::scene::{GasSpec, MassRule, RadiusDistribution};
 use collide::sim::{Boundary, Broadphase, Physics};
-use collide::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
 
 /// Dilute and dense, walls and periodic, elastic and inelastic.
 fn scenes() -> Vec<(String, RunSpec)> {

@@ -4,7 +4,7 @@
 use std::path::Path;
 use std::process::Output;
 
-use crate::cli::{collide, json_summary, scene_file};
+use crate::util::{collide, json_summary, scene_file};
 
 const SCENE: &str = "[scene]\nn = 3000\npacking = 0.3\nseed = 5\n[method]\ndt = 0.1\nsteps = 300\n";
 

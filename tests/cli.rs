@@ -1,31 +1,8 @@
 //! The `collide` command as a user meets it: summaries, JSON, dumps and bad input.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-pub fn collide(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("the collide binary runs")
-}
-
-/// The JSON summary of `collide ARGS --json`, which must succeed.
-pub fn json_summary(args: &[&str]) -> serde_json::Value {
-    let out = collide(&[args, &["--json"]].concat());
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{args:?} failed: {stderr}");
-    let stdout = String::from_utf8(out.stdout).unwrap();
-    serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
-}
-
-pub fn scene_file(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let path = dir.join(name);
-    std::fs::write(&path, text).unwrap();
-    path
-}
+use crate::util::{collide, json_summary, scene_file};
 
 const SEED_SCENE: &str = "experiments/scenes/seed-1000.toml";
 

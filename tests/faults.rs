@@ -6,11 +6,12 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use collide::records::{self, Record};
+use collide::study::records::{self, Record};
 use polars::prelude::{Column, DataFrame, ParquetWriter};
 
-use crate::cli::{collide, scene_file};
-use crate::study::{manifest, processes_mentioning, sample_records};
+use crate::util::{
+    collide, manifest, processes_mentioning, run_study, sample_records, scene_file, study_command,
+};
 
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
@@ -139,22 +140,7 @@ fn resume_passes_over_damaged_files_and_check_refuses_a_damaged_baseline() {
         dir.path(),
         "repetitions = 2\nwarmups = 0\n[backends]\nserial = true\n",
     );
-    let run = |extra: &[&str]| {
-        collide(
-            &[
-                &[
-                    "run",
-                    "--no-report",
-                    path.as_str(),
-                    "--quiet",
-                    "--out",
-                    out.to_str().unwrap(),
-                ],
-                extra,
-            ]
-            .concat(),
-        )
-    };
+    let run = |extra: &[&str]| run_study(&path, &out, &[&["--quiet"], extra].concat());
     assert!(run(&[]).status.success());
     let study = out.join("tiny");
     let good = records::files_in(&study).unwrap().remove(0);
@@ -222,15 +208,8 @@ fn a_hard_kill_of_collide_run_takes_its_measurement_child_with_it() {
         dir.path(),
         "repetitions = 1\nwarmups = 0\n[sweep]\nsteps = [10000000]\n[backends]\nserial = true\n",
     );
-    let mut study = Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args([
-            "run",
-            &path,
-            "--no-report",
-            "--quiet",
-            "--out",
-            out.to_str().unwrap(),
-        ])
+    let mut study = study_command(&path, &out)
+        .arg("--quiet")
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()

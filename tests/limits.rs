@@ -5,7 +5,8 @@
 use std::path::Path;
 
 use collide::backend::serial;
-use collide::scene_file::{self, Overrides};
+use collide::run::overrides::Overrides;
+use collide::run::scene_file;
 use proptest::prelude::*;
 use proptest::test_runner::{RngAlgorithm, TestCaseError, TestRng, TestRunner};
 
@@ -184,7 +185,7 @@ fn refused_or_sound(text: &str) -> Result<Outcome, String> {
     Ok(Outcome::Ran)
 }
 
-fn domain_has_field(prepared: &collide::spec::PreparedRun) -> bool {
+fn domain_has_field(prepared: &collide::run::spec::PreparedRun) -> bool {
     prepared.scene.physics.gravity.is_some()
 }
 

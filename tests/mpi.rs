@@ -4,7 +4,7 @@
 use std::os::unix::fs::PermissionsExt;
 use std::time::{Duration, Instant};
 
-use crate::cli::{collide, json_summary as summary, scene_file};
+use crate::util::{collide, json_summary as summary, scene_file};
 
 #[test]
 fn mpi_at_1_2_3_and_4_ranks_gives_the_serial_hash() {

@@ -1,10 +1,10 @@
 //! Physics over many steps: conservation, determinism, broad-phase equivalence, walls.
 
 use collide::backend::serial;
+use collide::run::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
+use collide::run::summary::RunSummary;
 use collide::sim::scene::{GasSpec, Placement};
 use collide::sim::{Boundary, Broadphase, Physics, Stepper};
-use collide::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
-use collide::summary::RunSummary;
 
 fn gas(
     n_particles: usize,
@@ -171,9 +171,12 @@ fn gravity_uses_verlet_and_a_disk_bounces_back_to_its_height() {
         dt = 0.0001
         steps = 50000
     "#;
-    let spec =
-        collide::scene_file::parse(std::path::Path::new("drop.toml"), toml, &Default::default())
-            .unwrap();
+    let spec = collide::run::scene_file::parse(
+        std::path::Path::new("drop.toml"),
+        toml,
+        &Default::default(),
+    )
+    .unwrap();
     let prepared = spec.prepare().unwrap();
     let mut particles = prepared.scene.particles.clone();
     let mut stepper = Stepper::for_scene(&prepared.scene, prepared.params);

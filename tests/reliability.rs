@@ -7,14 +7,14 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use collide::limits::{MAX_WORKERS_PER_CORE, Machine};
-use collide::records;
+use collide::run::backend_kind::BackendKind;
+use collide::run::limits::{MAX_WORKERS_PER_CORE, Machine};
+use collide::study::records;
 use rustix::process::Signal;
 
-use crate::cli::{collide, scene_file};
-use crate::study::interrupt_after_first_row;
-
-const SCENE: &str = "[scene]\nn = 200\npacking = 0.1\nseed = 3\n[method]\ndt = 0.1\nsteps = 20\n";
+use crate::util::{
+    SCENE, collide, interrupt_after_first_row, run_study, scene_file, study_command,
+};
 
 /// An inline scene entry named `name` (TOML-escaped by the caller).
 fn inline_scene(name: &str) -> String {
@@ -143,7 +143,7 @@ fn names_that_would_escape_the_results_folder_are_refused_before_anything_runs()
 
 /// A measured-looking row of study `study`, from the study tests' fixed summary.
 fn sample_row(study: &str) -> records::Record {
-    let environment = collide::environment::Environment::capture();
+    let environment = collide::study::environment::Environment::capture();
     let context = records::RecordContext {
         study,
         manifest_hash: "0",
@@ -151,7 +151,7 @@ fn sample_row(study: &str) -> records::Record {
         config_key: "k",
         scene: "s",
         scaling: "strong",
-        backend: "serial",
+        backend: BackendKind::Serial,
         workers: 1,
         repetition: 0,
         environment: &environment,
@@ -265,7 +265,7 @@ fn runs_too_large_for_the_machine_are_refused_before_allocating() {
         "name = \"m\"\n[sweep]\nn = [20000000]\n[backends]\nmpi = [2, 4]\n{}",
         inline_scene("gas")
     );
-    let err = collide::manifest::parse(Path::new("m.toml"), &ranks, &machine)
+    let err = collide::study::manifest::parse(Path::new("m.toml"), &ranks, &machine)
         .unwrap_err()
         .to_string();
     assert!(
@@ -279,7 +279,7 @@ fn worker_counts_above_the_ceiling_are_refused_unless_insisted_on() {
     let dir = tempfile::tempdir().unwrap();
     let scene = scene_file(dir.path(), "gas.toml", SCENE);
     let scene = scene.to_str().unwrap();
-    let ceiling = MAX_WORKERS_PER_CORE * collide::backend::machine_cores();
+    let ceiling = MAX_WORKERS_PER_CORE * collide::system::machine::machine_cores();
     let over = (ceiling + 1).to_string();
     for count in [over.as_str(), "3000", "10000"] {
         let stderr = refused(&["simulate", scene, "--backend", "rayon", "--threads", count]);
@@ -319,9 +319,10 @@ fn worker_counts_above_the_ceiling_are_refused_unless_insisted_on() {
         )
     };
     for backends in ["rayon = [2, 17]", "rayon = [10000]", "mpi = [4, 100]"] {
-        let err = collide::manifest::parse(Path::new("m.toml"), &manifest(backends), &machine)
-            .unwrap_err()
-            .to_string();
+        let err =
+            collide::study::manifest::parse(Path::new("m.toml"), &manifest(backends), &machine)
+                .unwrap_err()
+                .to_string();
         assert!(
             err.starts_with("m.toml:2: `backends.")
                 && err.contains("at most 16")
@@ -329,7 +330,7 @@ fn worker_counts_above_the_ceiling_are_refused_unless_insisted_on() {
             "{err}"
         );
     }
-    let insisted = collide::manifest::parse(
+    let insisted = collide::study::manifest::parse(
         Path::new("m.toml"),
         &manifest("rayon = [10000]\noversubscribe = true"),
         &machine,
@@ -340,16 +341,8 @@ fn worker_counts_above_the_ceiling_are_refused_unless_insisted_on() {
 }
 
 fn spawn_study(manifest: &str, out: &Path) -> std::process::Child {
-    Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args([
-            "run",
-            manifest,
-            "--quiet",
-            "--no-report",
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
+    study_command(manifest, out)
+        .arg("--quiet")
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -451,21 +444,7 @@ fn unfinished_files_of_a_killed_study_are_never_results_and_are_removed_next_tim
         inline_scene("gas")
     );
     let manifest = scene_file(dir.path(), "tiny.toml", &text);
-    let run = |extra: &[&str]| {
-        collide(
-            &[
-                &[
-                    "run",
-                    manifest.to_str().unwrap(),
-                    "--no-report",
-                    "--out",
-                    out.to_str().unwrap(),
-                ],
-                extra,
-            ]
-            .concat(),
-        )
-    };
+    let run = |extra: &[&str]| run_study(manifest.to_str().unwrap(), &out, extra);
     assert!(run(&[]).status.success());
     let study = out.join("tiny");
     let results = records::files_in(&study).unwrap();

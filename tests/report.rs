@@ -1,11 +1,12 @@
 //! `collide report` from fixed synthetic records: the markdown is snapshot-tested, and
 //! the numbers in it are checked against hand-computed speedups.
 
-use collide::environment::Environment;
-use collide::figures::{self, Figure};
-use collide::records::{Record, RecordContext};
-use collide::summary::RunSummary;
-use collide::{analysis, report};
+use collide::report::figures::scaling::{self, Figure};
+use collide::report::{analysis, markdown};
+use collide::run::backend_kind::BackendKind;
+use collide::run::summary::RunSummary;
+use collide::study::environment::Environment;
+use collide::study::records::{Record, RecordContext};
 
 fn environment() -> Environment {
     Environment {
@@ -92,19 +93,19 @@ fn records() -> Vec<Record> {
 /// and times that grow with the work.
 fn study_records(scaling: &str) -> Vec<Record> {
     let environment = environment();
-    let runs: [(&str, usize, [f64; 3]); 7] = [
-        ("serial", 1, [0.0100, 0.0102, 0.0110]),
-        ("rayon", 1, [0.0104, 0.0105, 0.0120]),
-        ("rayon", 2, [0.0055, 0.0056, 0.0060]),
-        ("rayon", 4, [0.0060, 0.0070, 0.0090]),
-        ("mpi", 1, [0.0106, 0.0108, 0.0115]),
-        ("mpi", 2, [0.0058, 0.0060, 0.0061]),
-        ("mpi", 4, [0.0100, 0.0120, 0.0150]),
+    let runs: [(BackendKind, usize, [f64; 3]); 7] = [
+        (BackendKind::Serial, 1, [0.0100, 0.0102, 0.0110]),
+        (BackendKind::Rayon, 1, [0.0104, 0.0105, 0.0120]),
+        (BackendKind::Rayon, 2, [0.0055, 0.0056, 0.0060]),
+        (BackendKind::Rayon, 4, [0.0060, 0.0070, 0.0090]),
+        (BackendKind::Mpi, 1, [0.0106, 0.0108, 0.0115]),
+        (BackendKind::Mpi, 2, [0.0058, 0.0060, 0.0061]),
+        (BackendKind::Mpi, 4, [0.0100, 0.0120, 0.0150]),
     ];
     let mut records = Vec::new();
     for repetition in 0..3 {
         for (backend, workers, times) in runs {
-            let key = format!("{backend}-{workers}");
+            let key = format!("{}-{workers}", backend.name());
             let context = RecordContext {
                 study: "synthetic",
                 manifest_hash: "m",
@@ -118,17 +119,13 @@ fn study_records(scaling: &str) -> Vec<Record> {
                 environment: &environment,
                 study_started_utc: "2026-11-22T12:00:00Z",
             };
-            let (threads, ranks) = if backend == "mpi" {
-                (1, workers)
-            } else {
-                (workers, 1)
-            };
+            let (threads, ranks) = backend.split(workers);
             // Weak scaling: p workers do p times the work of one.
             let work = if scaling == "weak" { workers } else { 1 };
             let wall_s = times[repetition as usize] * work as f64;
             let mut record = Record::measured(
                 &context,
-                &summary(backend, threads, ranks, 1000 * work, wall_s),
+                &summary(backend.name(), threads, ranks, 1000 * work, wall_s),
             );
             // Fixed, not this machine's: the load it was under when each run ended.
             record.load_average = 0.5 + 0.25 * f64::from(repetition);
@@ -149,12 +146,12 @@ fn markdown(records: &[Record]) -> String {
                 .collect()
         })
         .collect();
-    let pictures = report::Pictures {
+    let pictures = markdown::Pictures {
         figures,
         scene: Some("scene.png".into()),
         accuracy: None,
     };
-    report::markdown(records, &setups, "results/synthetic/", &pictures)
+    markdown::markdown(records, &setups, "results/synthetic/", &pictures)
 }
 
 #[test]
@@ -166,7 +163,7 @@ fn the_report_of_fixed_records_matches_its_snapshot() {
 fn every_figure_is_a_png_of_the_stated_size_with_each_backend_drawn() {
     let dir = tempfile::tempdir().unwrap();
     let setups = analysis::analyse(&records()).unwrap();
-    let drawn = figures::draw_setup(&setups[0], dir.path(), "setup-1").unwrap();
+    let drawn = scaling::draw_setup(&setups[0], dir.path(), "setup-1").unwrap();
     assert_eq!(drawn.len(), 4);
     for (figure, path) in drawn {
         let image = image::open(&path).unwrap().to_rgb8();
@@ -232,7 +229,7 @@ fn render_draws_the_disks_as_a_png_and_the_run_as_a_gif() {
 
     let dir = tempfile::tempdir().unwrap();
     let (png, gif) = (dir.path().join("scene.png"), dir.path().join("run.gif"));
-    let out = crate::cli::collide(&[
+    let out = crate::util::collide(&[
         "render",
         "experiments/scenes/seed-1000.toml",
         "--n",
@@ -285,7 +282,7 @@ fn parquet_with(
     edit: impl FnOnce(&mut polars::prelude::DataFrame),
 ) -> std::path::PathBuf {
     use polars::prelude::ParquetWriter;
-    let mut frame = collide::records::to_frame(records).unwrap();
+    let mut frame = collide::study::records::to_frame(records).unwrap();
     edit(&mut frame);
     let path = dir.join("study.parquet");
     let file = std::fs::File::create(&path).unwrap();
@@ -298,7 +295,7 @@ fn a_file_written_by_schema_version_1_is_reported_as_timed_strong_scaling() {
     // A real file of the seed-report study, written by the collide of schema version 1
     // (no scaling, method or accuracy columns).
     let dir = tempfile::tempdir().unwrap();
-    let out = crate::cli::collide(&[
+    let out = crate::util::collide(&[
         "report",
         "tests/fixtures/schema-1-seed-report.parquet",
         "--out",
@@ -342,7 +339,7 @@ fn a_file_missing_a_measured_column_or_from_a_newer_collide_is_refused_with_the_
     ];
     for (reason, edit) in cases {
         let path = parquet_with(dir.path(), &records(), edit);
-        let out = crate::cli::collide(&[
+        let out = crate::util::collide(&[
             "report",
             path.to_str().unwrap(),
             "--out",
@@ -397,13 +394,15 @@ fn accuracy_records() -> Vec<Record> {
 
 #[test]
 fn the_accuracy_report_tabulates_errors_and_draws_the_pareto_and_stability_figures() {
-    use collide::{accuracy, accuracy_figures};
+    use collide::report::accuracy;
+    use collide::report::figures::{self, pareto::Pareto, stability::Stability};
     let records = accuracy_records();
     assert!(accuracy::is_accuracy_study(&records));
     assert!(!accuracy::is_accuracy_study(&self::records()));
     let groups = accuracy::analyse(&records);
     let dir = tempfile::tempdir().unwrap();
-    let (pareto, stability) = accuracy_figures::draw(&groups, dir.path()).unwrap();
+    let pareto = figures::write(&Pareto(&groups), dir.path()).unwrap();
+    let stability = figures::write(&Stability(&groups), dir.path()).unwrap();
     let count =
         |image: &image::RgbImage, rgb: [u8; 3]| image.pixels().filter(|p| p.0 == rgb).count();
     let pareto = image::open(&pareto).unwrap().to_rgb8();
@@ -419,8 +418,8 @@ fn the_accuracy_report_tabulates_errors_and_draws_the_pareto_and_stability_figur
     let white = count(&stability, [255, 255, 255]);
     assert!(white < 1100 * 560 / 2, "mostly blank: {white} white pixels");
     assert!(count(&stability, [0, 0, 0]) > 500);
-    let pictures = report::Pictures {
-        accuracy: Some(report::AccuracySection {
+    let pictures = markdown::Pictures {
+        accuracy: Some(markdown::AccuracySection {
             groups,
             figures: vec![
                 "accuracy-pareto.png".into(),
@@ -431,7 +430,7 @@ fn the_accuracy_report_tabulates_errors_and_draws_the_pareto_and_stability_figur
         ..Default::default()
     };
     let setups = analysis::analyse(&records).unwrap();
-    let text = report::markdown(&records, &setups, "results/accuracy/", &pictures);
+    let text = markdown::markdown(&records, &setups, "results/accuracy/", &pictures);
     assert!(text.starts_with("# Accuracy report"), "{text}");
     assert!(text.contains("### Packing 0.40"), "{text}");
     // dt = 0.1 at packing 0.4: simulated time 10 in 0.03·2.6 s, Z = 2.6·0.95 against 2.6
@@ -487,14 +486,14 @@ fn haff_curve(rate: f64, wobble: f64, samples: usize) -> String {
 }
 
 /// The markdown report of a cooling study's records with its accuracy section.
-fn cooling_report(records: &[Record], section: report::AccuracySection) -> String {
-    let pictures = report::Pictures {
+fn cooling_report(records: &[Record], section: markdown::AccuracySection) -> String {
+    let pictures = markdown::Pictures {
         figures: Vec::new(),
         scene: None,
         accuracy: Some(section),
     };
     let setups = analysis::analyse(records).unwrap();
-    report::markdown(records, &setups, "results/cooling/", &pictures)
+    markdown::markdown(records, &setups, "results/cooling/", &pictures)
 }
 
 /// A successful serial record of the fixed set, to vary.
@@ -507,8 +506,8 @@ fn serial_record() -> Record {
 
 #[test]
 fn the_cooling_report_says_whether_and_when_each_run_broke_down_and_marks_the_collapse() {
-    use collide::accuracy::{self, Breakdown};
-    use collide::accuracy_figures;
+    use collide::report::accuracy::{self, Breakdown};
+    use collide::report::figures::{self, cooling::Cooling};
     let template = serial_record();
     // Two event runs at the same dt that differ only in tc: the guarded one follows
     // Haff's law (t₀ = 10) to t = 20; the unguarded one wobbles 10% about it and
@@ -551,7 +550,7 @@ fn the_cooling_report_says_whether_and_when_each_run_broke_down_and_marks_the_co
     // chart has fewer red pixels.
     let red_pixels = |curves: &[accuracy::CoolingCurve]| {
         let dir = tempfile::tempdir().unwrap();
-        let path = accuracy_figures::draw_cooling(curves, dir.path()).unwrap();
+        let path = figures::write(&Cooling(curves), dir.path()).unwrap();
         let image = image::open(&path).unwrap().to_rgb8();
         image.pixels().filter(|p| p.0 == [0xd6, 0x27, 0x28]).count()
     };
@@ -563,7 +562,7 @@ fn the_cooling_report_says_whether_and_when_each_run_broke_down_and_marks_the_co
         "{marked} red pixels with the cross, {plain} without"
     );
 
-    let section = report::AccuracySection {
+    let section = markdown::AccuracySection {
         groups: accuracy::analyse(&records),
         figures: Vec::new(),
         cooling: curves,
@@ -588,7 +587,8 @@ fn the_cooling_report_says_whether_and_when_each_run_broke_down_and_marks_the_co
 
 #[test]
 fn the_cooling_chart_compares_each_method_with_haffs_law_and_marks_breakdowns() {
-    use collide::{accuracy, accuracy_figures};
+    use collide::report::accuracy;
+    use collide::report::figures::{self, cooling::Cooling};
     let template = serial_record();
     // The event run follows Haff's law with t₀ = 10 exactly; the small step within 1%;
     // the large step loses energy twice as fast (T₀/(1 + 2t/t₀)²): a breakdown.
@@ -619,7 +619,7 @@ fn the_cooling_chart_compares_each_method_with_haffs_law_and_marks_breakdowns() 
     assert!(curves[1].broke_down(), "{}", curves[1].haff_deviation);
     assert!(!curves[2].broke_down(), "{}", curves[2].haff_deviation);
     let dir = tempfile::tempdir().unwrap();
-    let path = accuracy_figures::draw_cooling(&curves, dir.path()).unwrap();
+    let path = figures::write(&Cooling(&curves), dir.path()).unwrap();
     assert!(path.ends_with("accuracy-cooling.png"));
     let image = image::open(&path).unwrap().to_rgb8();
     assert_eq!(image.dimensions(), (1400, 620));
@@ -627,7 +627,7 @@ fn the_cooling_chart_compares_each_method_with_haffs_law_and_marks_breakdowns() 
     // Haff's law in black and the first two curves in the palette's blue and red.
     assert!(count([0, 0, 0]) > 1000, "Haff's law drawn");
     assert!(count([0x1f, 0x77, 0xb4]) > 200 && count([0xd6, 0x27, 0x28]) > 100);
-    let section = report::AccuracySection {
+    let section = markdown::AccuracySection {
         groups: accuracy::analyse(&records),
         figures: Vec::new(),
         cooling: curves,

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use polars::prelude::DataType;
 
-use crate::cli::json_summary;
+use crate::util::json_summary;
 
 const DOC: &str = "docs/records.md";
 
@@ -56,7 +56,7 @@ fn doc_type(dtype: &DataType) -> &'static str {
 #[test]
 fn the_parquet_columns_are_those_documented() {
     let heading = "The Parquet records";
-    let frame = collide::records::to_frame(&[]).unwrap();
+    let frame = collide::study::records::to_frame(&[]).unwrap();
     let written: BTreeMap<String, &str> = frame
         .columns()
         .iter()

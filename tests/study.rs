@@ -2,26 +2,14 @@
 //! and bad input.
 
 use std::os::unix::fs::PermissionsExt;
-use std::path::Path;
 use std::time::{Duration, Instant};
 
-use collide::environment::Environment;
-use collide::records::{self, Record, RecordContext, STATUS_TIMED_OUT};
-use collide::summary::RunSummary;
+use collide::study::records::{self, STATUS_TIMED_OUT};
 
-use crate::cli::{collide, json_summary, scene_file};
-
-const SCENE: &str = "[scene]\nn = 200\npacking = 0.1\nseed = 3\n[method]\ndt = 0.1\nsteps = 20\n";
-
-/// A manifest over `scene.toml` (written beside it) with the given extra text.
-pub fn manifest(dir: &Path, body: &str) -> String {
-    scene_file(dir, "scene.toml", SCENE);
-    let text = format!("name = \"tiny\"\n{body}\n[[scenes]]\nfile = \"scene.toml\"\n");
-    scene_file(dir, "tiny.toml", &text)
-        .to_str()
-        .unwrap()
-        .to_owned()
-}
+use crate::util::{
+    collide, interrupt_after_first_row, manifest, processes_mentioning, run_study, sample_records,
+    scene_file,
+};
 
 const BACKENDS: &str = "[backends]\nserial = true\nrayon = [2]\n";
 
@@ -95,21 +83,7 @@ fn a_study_records_every_repetition_and_resume_runs_only_what_is_missing() {
         dir.path(),
         &format!("repetitions = 2\nwarmups = 0\n{BACKENDS}"),
     );
-    let run = |extra: &[&str]| {
-        collide(
-            &[
-                &[
-                    "run",
-                    path.as_str(),
-                    "--out",
-                    out.to_str().unwrap(),
-                    "--no-report",
-                ],
-                extra,
-            ]
-            .concat(),
-        )
-    };
+    let run = |extra: &[&str]| run_study(&path, &out, extra);
     assert!(run(&[]).status.success());
     let parquet = records::files_in(&out.join("tiny")).unwrap();
     assert_eq!(parquet.len(), 1, "{parquet:?}");
@@ -174,7 +148,7 @@ fn an_accuracy_study_runs_both_methods_and_reports_pareto_and_stability_figures(
          observe = [\"accuracy\", \"accuracy\", \"timing\"]\n\
          zip = [\"dt\", \"steps\", \"method\", \"observe\"]\n[backends]\nserial = true\n",
     );
-    let run = collide(&["run", &path, "--out", out.to_str().unwrap(), "--no-report"]);
+    let run = run_study(&path, &out, &[]);
     assert!(
         run.status.success(),
         "{}",
@@ -225,7 +199,7 @@ fn a_run_over_its_timeout_is_recorded_as_timed_out_and_fails_the_study() {
         "repetitions = 1\nwarmups = 0\ntimeout_s = 0.2\n[sweep]\nsteps = [10000000]\n\
          [backends]\nserial = true\n",
     );
-    let result = collide(&["run", &path, "--out", out.to_str().unwrap(), "--no-report"]);
+    let result = run_study(&path, &out, &[]);
     assert!(!result.status.success());
     let stderr = String::from_utf8(result.stderr).unwrap();
     assert!(stderr.contains("1 run(s) failed"), "{stderr}");
@@ -303,7 +277,7 @@ fn a_study_of_mpi_configurations_only_is_an_error_without_mpi() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("results");
     let path = manifest(dir.path(), "[backends]\nmpi = [1, 2]\n");
-    let run = collide(&["run", &path, "--out", out.to_str().unwrap(), "--no-report"]);
+    let run = run_study(&path, &out, &[]);
     assert_eq!(run.status.code(), Some(2));
     let stderr = String::from_utf8(run.stderr).unwrap();
     for fragment in [
@@ -321,34 +295,6 @@ fn a_study_of_mpi_configurations_only_is_an_error_without_mpi() {
         !out.join("tiny").exists(),
         "wrote a results folder for nothing"
     );
-}
-
-pub fn sample_records() -> Vec<Record> {
-    let environment = Environment::capture();
-    let context = RecordContext {
-        study: "s",
-        manifest_hash: "m",
-        build_id: "b",
-        config_key: "k",
-        scene: "seed",
-        scaling: "strong",
-        backend: "rayon",
-        workers: 2,
-        repetition: 1,
-        environment: &environment,
-        study_started_utc: "2026-11-22T00:00:00Z",
-    };
-    let json = json_summary(&[
-        "simulate",
-        "experiments/scenes/seed-1000.toml",
-        "--steps",
-        "10",
-    ]);
-    let summary: RunSummary = serde_json::from_value(json).unwrap();
-    vec![
-        Record::measured(&context, &summary),
-        Record::failed(&context, STATUS_TIMED_OUT, "killed after 1 s".into()),
-    ]
 }
 
 #[test]
@@ -396,59 +342,6 @@ fn corrupt_foreign_and_old_results_are_refused_with_the_reason() {
     let empty = tempfile::tempdir().unwrap();
     let stderr = stderr_of(&["results", empty.path().to_str().unwrap()]);
     assert!(stderr.contains("no .parquet results"), "{stderr}");
-}
-
-/// Processes whose command line mentions `needle`.
-pub fn processes_mentioning(needle: &str) -> Vec<String> {
-    std::fs::read_dir("/proc")
-        .unwrap()
-        .filter_map(|entry| std::fs::read(entry.ok()?.path().join("cmdline")).ok())
-        .map(|bytes| String::from_utf8_lossy(&bytes).replace('\0', " "))
-        .filter(|cmdline| cmdline.contains(needle))
-        .collect()
-}
-
-/// Starts `collide run MANIFEST --quiet --out OUT` in its own process group, waits until
-/// it has written one more results file into `OUT/STUDY`, then sends `signal` to the
-/// group as a terminal's Ctrl-C would (reaching it and not this test). Its output.
-pub fn interrupt_after_first_row(
-    manifest: &str,
-    out: &Path,
-    study: &str,
-    signal: rustix::process::Signal,
-) -> std::process::Output {
-    use std::os::unix::process::CommandExt;
-
-    let folder = out.join(study);
-    let count = || records::files_in(&folder).map_or(0, |files| files.len());
-    let before = count();
-    let child = std::process::Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args([
-            "run",
-            manifest,
-            "--quiet",
-            "--no-report",
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .process_group(0)
-        .spawn()
-        .unwrap();
-    let started = Instant::now();
-    while count() == before {
-        assert!(
-            started.elapsed() < Duration::from_secs(20),
-            "no results file appeared"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    std::thread::sleep(Duration::from_millis(300));
-    let group = rustix::process::Pid::from_raw(child.id() as i32).unwrap();
-    rustix::process::kill_process_group(group, signal).unwrap();
-    child.wait_with_output().unwrap()
 }
 
 #[test]

@@ -6,6 +6,7 @@ mod backends;
 mod check;
 mod cli;
 mod faults;
+mod golden;
 mod limits;
 #[cfg(feature = "mpi")]
 mod mpi;
@@ -15,4 +16,5 @@ mod report;
 mod resting;
 mod schema;
 mod study;
+mod util;
 mod view;

@@ -17,7 +17,7 @@ use collide::view::raster::{Frame, View, draw};
 use collide::view::status::{STATUS_ROWS, StatusFont};
 use collide::view::window::Screen;
 
-use crate::cli::{collide, json_summary};
+use crate::util::{collide, json_summary};
 
 /// Set in the environment of a test run again under xvfb-run.
 const UNDER_XVFB: &str = "COLLIDE_TEST_UNDER_XVFB";

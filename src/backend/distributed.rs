@@ -21,6 +21,7 @@ use crate::backend::{
     Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
     summarize, timed,
 };
+use crate::run::spec::RunSpec;
 use crate::sim::grid::{Contact, Entry, StripGrid, StripLayout, receive_band, refresh_band};
 use crate::sim::neighbours::{PairList, Skin};
 use crate::sim::observe::observe;
@@ -29,7 +30,6 @@ use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::ContactSchedule;
 use crate::sim::step::{FIRST_BUILDS_SINCE_REORDER, REORDER_INTERVAL, advance_disks};
 use crate::sim::{Boundary, Particles, StepCounters};
-use crate::spec::RunSpec;
 
 /// Runs `spec` on every rank of `comm` (all ranks call this together). Rank 0 returns
 /// the summary and the whole final state; the other ranks return `None`.
@@ -511,9 +511,9 @@ mod tests {
     use super::*;
     use crate::backend::comm::ThreadComm;
     use crate::backend::serial;
+    use crate::run::spec::{InjectedSlowdown, MethodSpec, SceneSource};
     use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution};
     use crate::sim::{Broadphase, Physics};
-    use crate::spec::{InjectedSlowdown, MethodSpec, SceneSource};
 
     fn spec(boundary: Boundary, restitution: f64, packing: f64) -> RunSpec {
         RunSpec {

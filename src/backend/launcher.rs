@@ -6,9 +6,10 @@ use std::ffi::OsString;
 use std::process::Command;
 use std::time::Duration;
 
-use crate::backend::{BackendError, USABLE_CPUS_ENV, usable_cpus};
-use crate::process::{Ended, run_with_timeout, stop_children_on_interrupt, tail};
-use crate::summary::RunSummary;
+use crate::backend::BackendError;
+use crate::run::summary::RunSummary;
+use crate::system::machine::{USABLE_CPUS_ENV, usable_cpus};
+use crate::system::process::{Ended, run_with_timeout, stop_children_on_interrupt, tail};
 
 /// How to start the ranks.
 #[derive(Clone, Debug, PartialEq)]

@@ -16,11 +16,13 @@ use std::num::NonZeroUsize;
 use std::ops::ControlFlow;
 use std::time::Instant;
 
-use crate::sim::observe::{Observables, observe, state_hash};
+use crate::run::spec::{InjectedSlowdown, Method, PreparedRun};
+use crate::run::summary::RunSummary;
+use crate::sim::observe::{Observables, observe, state_hash, thermodynamics};
 use crate::sim::scene::PlacementError;
 use crate::sim::{Particles, StepCounters};
-use crate::spec::{InjectedSlowdown, Method, PreparedRun};
-use crate::summary::RunSummary;
+pub use crate::system::machine::CpuScope;
+use crate::system::machine::{LoopSeconds, cpu_seconds, usable_cpus};
 
 /// Which backend runs the steps, with its worker count.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -35,16 +37,6 @@ pub enum BackendSpec {
     Mpi {
         ranks: Option<NonZeroUsize>,
     },
-}
-
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn cpu_lists_count_ranges_and_singles() {
-        assert_eq!(super::count_cpu_list("0-1\n"), Some(2));
-        assert_eq!(super::count_cpu_list("0-3,8,10-11"), Some(7));
-        assert_eq!(super::count_cpu_list("garbage"), None);
-    }
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -87,40 +79,6 @@ pub fn timed<T>(seconds: &mut f64, work: impl FnOnce() -> T) -> T {
     let result = work();
     *seconds += start.elapsed().as_secs_f64();
     result
-}
-
-/// Whose CPU time a backend's stepping loop counts.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum CpuScope {
-    /// The calling thread (serial; one rank, whose ranks' times are then summed).
-    Thread,
-    /// Every thread of this process (the rayon pool).
-    Process,
-}
-
-/// CPU seconds run so far by this thread or process (`clock_gettime`'s CPU-time clocks,
-/// exact to the nanosecond; time spent waiting for a CPU is not counted). `None` where
-/// the system does not provide them.
-pub fn cpu_seconds(scope: CpuScope) -> Option<f64> {
-    let clock = match scope {
-        CpuScope::Thread => libc::CLOCK_THREAD_CPUTIME_ID,
-        CpuScope::Process => libc::CLOCK_PROCESS_CPUTIME_ID,
-    };
-    let mut now = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `now` is a valid, writable timespec for the duration of the call.
-    let status = unsafe { libc::clock_gettime(clock, &mut now) };
-    (status == 0).then_some(now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9)
-}
-
-/// Wall and CPU seconds of a stepping loop.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LoopSeconds {
-    pub wall: f64,
-    /// CPU seconds of the threads in `scope` (`None` where unknown).
-    pub cpu: Option<f64>,
 }
 
 /// The stepping loop every backend times: `step(1)` to `step(steps)`, each followed by
@@ -192,44 +150,6 @@ pub struct Workers {
     pub ranks: usize,
 }
 
-/// Logical CPUs online on this machine, whatever this process is bound to (an MPI rank
-/// bound to one core still counts them all); the affinity-aware count as a fallback.
-pub fn machine_cores() -> usize {
-    let online = std::fs::read_to_string("/sys/devices/system/cpu/online").ok();
-    online
-        .as_deref()
-        .and_then(count_cpu_list)
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, NonZeroUsize::get))
-}
-
-/// Names the variable through which an MPI launch passes its [`usable_cpus`] to the
-/// ranks it starts (each may be bound to a single core).
-pub const USABLE_CPUS_ENV: &str = "COLLIDE_USABLE_CPUS";
-
-/// The CPUs this process may run on: its affinity mask and CPU quota (`taskset`, a
-/// batch scheduler's cpuset, a container's limit), as the standard library counts them.
-/// Worker defaults and the oversubscription verdict follow it. An MPI rank takes the
-/// count of the process that launched the ranks, from [`USABLE_CPUS_ENV`].
-pub fn usable_cpus() -> usize {
-    std::env::var(USABLE_CPUS_ENV)
-        .ok()
-        .and_then(|count| count.parse().ok())
-        .filter(|&count| count > 0)
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, NonZeroUsize::get))
-}
-
-/// Counts the CPUs in a kernel CPU list such as `0-3,8,10-11`.
-fn count_cpu_list(list: &str) -> Option<usize> {
-    let mut count = 0;
-    for range in list.trim().split(',') {
-        count += match range.split_once('-') {
-            Some((first, last)) => last.parse::<usize>().ok()? + 1 - first.parse::<usize>().ok()?,
-            None => range.parse::<usize>().map(|_| 1).ok()?,
-        };
-    }
-    Some(count)
-}
-
 /// What the stepping loop measured, for [`summarize`].
 #[derive(Clone, Debug)]
 pub struct Measured {
@@ -298,19 +218,17 @@ pub fn summarize(
     let scene = &prepared.scene;
     let physics = &scene.physics;
     let n_f = n.max(1) as f64;
-    // T̄: the time average of the sampled curve (trapezoids), else the mean of the ends.
-    let temperature = match &accuracy.temperature_curve {
-        Some(curve) if curve.len() > 1 => {
-            let area: f64 = curve
-                .windows(2)
-                .map(|w| 0.5 * (w[0][1] + w[1][1]) * (w[1][0] - w[0][0]))
-                .sum();
-            area / (curve[curve.len() - 1][0] - curve[0][0])
-        }
-        _ => 0.5 * (measured.initial.kinetic_energy + final_observables.kinetic_energy) / n_f,
-    };
-    let area = scene.domain.area();
-    let pressure = (n_f * temperature + counters.virial / (2.0 * duration)) / area;
+    let thermo = thermodynamics(
+        n,
+        scene.domain.area(),
+        duration,
+        counters.virial,
+        accuracy.temperature_curve.as_deref(),
+        [
+            measured.initial.kinetic_energy,
+            final_observables.kinetic_energy,
+        ],
+    );
     let elastic = physics.restitution == 1.0 && physics.wall_restitution == 1.0;
     let is_event = prepared.method == Method::Event;
     let missed = if is_event {
@@ -355,9 +273,9 @@ pub fn summarize(
         events_per_s: is_event
             .then(|| (counters.pair_collisions + counters.wall_collisions) as f64 / wall_s),
         collision_rate: Some(2.0 * counters.pair_collisions as f64 / (n_f * duration)),
-        temperature: Some(temperature),
-        pressure: Some(pressure),
-        compressibility_z: (temperature > 0.0).then(|| pressure * area / (n_f * temperature)),
+        temperature: Some(thermo.temperature),
+        pressure: Some(thermo.pressure),
+        compressibility_z: thermo.compressibility_z,
         missed_collisions: missed,
         missed_collision_fraction: missed
             .filter(|m| m + counters.pair_collisions > 0)

@@ -8,7 +8,7 @@ use mpi::traits::{Communicator as _, CommunicatorCollectives};
 
 use crate::backend::comm::Communicator;
 use crate::backend::{BackendError, RunOutcome, distributed};
-use crate::spec::RunSpec;
+use crate::run::spec::RunSpec;
 
 /// True when this process is a rank started by an MPI launcher (OpenMPI, MPICH, PMIx).
 pub fn launched_by_mpi() -> bool {

@@ -8,11 +8,11 @@ use crate::backend::{
     Accuracy, BackendError, Collapse, CpuScope, Measured, RunOutcome, StageSeconds, Workers,
     is_curve_sample, step_loop, summarize, timed,
 };
+use crate::run::spec::{Method, Observe, PreparedRun, RunSpec};
 use crate::sim::Particles;
 use crate::sim::Stepper;
 use crate::sim::event::EventSim;
 use crate::sim::observe::{MissedCollisions, observe};
-use crate::spec::{Method, Observe, PreparedRun, RunSpec};
 
 /// Builds the scene, runs it on one thread with its method, and measures the run
 /// stage by stage. Observing (the temperature curve, missed collisions) is timed apart

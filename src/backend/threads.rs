@@ -19,6 +19,7 @@ use crate::backend::{
     Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
     summarize, timed,
 };
+use crate::run::spec::RunSpec;
 use crate::sim::collision::DiskState;
 use crate::sim::grid::{
     Contact, Entry, StripGrid, find_contacts_all_pairs_from, number_slots, receive_band,
@@ -30,7 +31,6 @@ use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::ContactSchedule;
 use crate::sim::step::{FIRST_BUILDS_SINCE_REORDER, REORDER_INTERVAL, advance_disks};
 use crate::sim::{Broadphase, DiskSlices, Domain, Particles, Physics, StepCounters, StepParams};
-use crate::spec::RunSpec;
 
 /// Disks per parallel chunk of the per-disk stage: large enough to amortise scheduling.
 const MIN_CHUNK: usize = 4096;

@@ -1,5 +1,6 @@
-//! Observables of a state: energy, momentum, the bitwise state hash, and the exact
-//! count of collisions the time-stepped method misses.
+//! Observables of a state: energy, momentum, the bitwise state hash, the exact count of
+//! collisions the time-stepped method misses, and a run's temperature, pressure and
+//! compressibility factor.
 //!
 //! Sums run in id order so that they do not depend on storage order or on how
 //! disks were divided among workers.
@@ -33,6 +34,49 @@ pub fn observe(particles: &Particles) -> Observables {
     Observables {
         kinetic_energy,
         momentum,
+    }
+}
+
+/// A run's thermodynamics in 2D (k_B = 1): the mean temperature T̄ (kinetic energy per
+/// disk), the pressure from the collision virial and the compressibility factor Z.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Thermodynamics {
+    pub temperature: f64,
+    /// P = (n·T̄ + Σ d·J / (2·t)) / A: in a walled box the bulk estimate over the whole
+    /// box area (wall forces are not in the virial).
+    pub pressure: f64,
+    /// Z = P·A / (n·T̄); `None` for a state at rest.
+    pub compressibility_z: Option<f64>,
+}
+
+/// What a run of `n` disks in a box of `area` that lasted `duration` (simulated time)
+/// says of its thermodynamics. T̄ is the time average of the sampled `curve` of [t, T]
+/// (trapezoids) where there is one, else the mean of the initial and final kinetic
+/// energies per disk; `virial` is Σ d·J over the collisions.
+pub fn thermodynamics(
+    n: usize,
+    area: f64,
+    duration: f64,
+    virial: f64,
+    curve: Option<&[[f64; 2]]>,
+    kinetic_energies: [f64; 2],
+) -> Thermodynamics {
+    let n_f = n.max(1) as f64;
+    let temperature = match curve {
+        Some(curve) if curve.len() > 1 => {
+            let area: f64 = curve
+                .windows(2)
+                .map(|w| 0.5 * (w[0][1] + w[1][1]) * (w[1][0] - w[0][0]))
+                .sum();
+            area / (curve[curve.len() - 1][0] - curve[0][0])
+        }
+        _ => 0.5 * (kinetic_energies[0] + kinetic_energies[1]) / n_f,
+    };
+    let pressure = (n_f * temperature + virial / (2.0 * duration)) / area;
+    Thermodynamics {
+        temperature,
+        pressure,
+        compressibility_z: (temperature > 0.0).then(|| pressure * area / (n_f * temperature)),
     }
 }
 

@@ -2,7 +2,7 @@
 //! exact missed-collision count at a given dt, and the event method's number of
 //! events. Pure and deterministic (a function of the scene only, never of timings), so
 //! that `method = "auto"` and `dt = "auto"` choose the same on every run and backend.
-//! What to do with the measurements (tolerance, cost model) is `crate::auto`'s business.
+//! What to do with the measurements (tolerance, cost model) is `crate::run::auto`'s business.
 
 use super::event::{EventParams, EventSim};
 use super::observe::MissedCollisions;

@@ -3,7 +3,7 @@
 //! Everything here is pure: a [`GasSpec`] and its seed always give the same disks.
 //! (Placement gives the memory system hints, prefetches and huge pages, that change
 //! how fast the disks come, never which.)
-//! Parsing scene files lives in `crate::scene_file`; this module only builds state.
+//! Parsing scene files lives in `crate::run::scene_file`; this module only builds state.
 
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;

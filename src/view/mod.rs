@@ -4,5 +4,6 @@
 //! differently from `collide simulate`.
 
 pub mod raster;
+pub mod render;
 pub mod status;
 pub mod window;

@@ -3,7 +3,7 @@
 
 use ab_glyph::{Font, FontRef, PxScale, ScaleFont, point};
 
-use crate::figures::FONT_BYTES;
+use crate::report::figures::FONT_BYTES;
 use crate::view::raster::Frame;
 
 /// Rows below the drawing that hold the status line.

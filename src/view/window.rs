@@ -20,14 +20,15 @@ use minifb::{Key, KeyRepeat, Window, WindowOptions};
 use serde::Serialize;
 
 use crate::backend::threads::{self, ThreadedStepper};
-use crate::output::write_atomically;
-use crate::render::fast_speed;
+use crate::run::backend_kind::BackendKind;
+use crate::run::spec::{Method, PreparedRun};
 use crate::sim::Particles;
 use crate::sim::engine::Engine;
 use crate::sim::observe::state_hash;
 use crate::sim::snapshot::Snapshot;
-use crate::spec::{Method, PreparedRun};
+use crate::system::output::write_atomically;
 use crate::view::raster::{Drawn, Frame, View, draw};
+use crate::view::render::fast_speed;
 use crate::view::status::{STATUS_ROWS, StatusFont};
 
 /// What `collide view` was asked for, validated.
@@ -357,10 +358,11 @@ pub fn run(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<ViewS
         drawn_as: drawn_as.name(),
         state_hash: state_hash(&stepped.particles),
         backend: if options.threads.is_some() {
-            "rayon"
+            BackendKind::Rayon
         } else {
-            "serial"
-        },
+            BackendKind::Serial
+        }
+        .name(),
         threads: options.threads.map_or(1, NonZeroUsize::get),
         width: options.width,
         height: options.height,

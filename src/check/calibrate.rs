@@ -11,7 +11,7 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use crate::backend::{CpuScope, LoopSeconds, cpu_seconds};
+use crate::system::machine::{CpuScope, LoopSeconds, cpu_seconds};
 
 /// Values the workload reads and writes: 32 KiB, within a core's first-level cache.
 const LEN: usize = 1 << 12;

@@ -8,8 +8,9 @@ use polars::prelude::{
     Column, DataFrame, DataType, IntoLazy, PolarsResult, StringChunked, col, len,
 };
 
-use crate::manifest::Scaling;
-use crate::records::{self, Record, STATUS_OK};
+use crate::run::backend_kind::BackendKind;
+use crate::study::manifest::Scaling;
+use crate::study::records::{self, Record, STATUS_OK};
 
 /// One backend at one worker count.
 #[derive(Clone, Debug, PartialEq)]
@@ -234,19 +235,12 @@ fn distinct_hashes_per_series(frame: &DataFrame) -> PolarsResult<BTreeMap<String
         .collect())
 }
 
-fn backend_rank(backend: &str) -> usize {
-    match backend {
-        "serial" => 0,
-        "rayon" => 1,
-        "mpi" => 2,
-        _ => 3,
-    }
-}
-
 /// Orders a setup's backends and points, picks each backend's baseline and derives
 /// speedup, efficiency, Karp–Flatt and the Amdahl fit from the medians.
 fn derive_scaling(setup: &mut Setup) {
-    setup.backends.sort_by_key(|b| backend_rank(&b.backend));
+    setup
+        .backends
+        .sort_by_key(|b| BackendKind::rank_of(&b.backend));
     for backend in &mut setup.backends {
         backend.points.sort_by_key(|p| p.workers);
     }
@@ -260,7 +254,7 @@ fn derive_scaling(setup: &mut Setup) {
     let serial = setup
         .backends
         .iter()
-        .find(|b| b.backend == "serial")
+        .find(|b| b.backend == BackendKind::Serial.name())
         .and_then(one_worker);
     let weak = setup.scaling == Scaling::Weak;
     for backend in &mut setup.backends {

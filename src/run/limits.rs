@@ -1,8 +1,8 @@
 //! What a run may ask of this machine, checked before anything runs: memory for its
-//! disks ([`crate::spec::Footprint`]) and a ceiling on workers per logical core. The
+//! disks ([`crate::run::spec::Footprint`]) and a ceiling on workers per logical core. The
 //! checks are pure functions of a [`Machine`], so that tests can pose any machine.
 
-use crate::spec::Footprint;
+use crate::run::spec::Footprint;
 
 /// Above this many workers (threads or ranks) per logical core a run is refused unless
 /// the user insists (`--oversubscribe`, or `oversubscribe = true` in a manifest's
@@ -24,12 +24,12 @@ pub struct Machine {
 impl Machine {
     /// This machine, as the kernel reports it.
     pub fn this() -> Machine {
-        let total = crate::environment::machine_memory_bytes().unwrap_or(0);
-        let memory_bytes = crate::environment::memory_limit_bytes()
+        let total = crate::system::machine::machine_memory_bytes().unwrap_or(0);
+        let memory_bytes = crate::system::machine::memory_limit_bytes()
             .filter(|&limit| total == 0 || limit < total)
             .unwrap_or(total);
         Machine {
-            logical_cores: crate::backend::machine_cores(),
+            logical_cores: crate::system::machine::machine_cores(),
             memory_bytes,
         }
     }
@@ -76,7 +76,7 @@ pub fn check_memory(footprint: &Footprint, machine: &Machine) -> Result<(), Stri
         return Ok(());
     }
     let per_copy = machine.memory_bytes / footprint.copies;
-    let fits = per_copy.saturating_sub(crate::spec::BASE_BYTES) / footprint.bytes_per_disk;
+    let fits = per_copy.saturating_sub(crate::run::spec::BASE_BYTES) / footprint.bytes_per_disk;
     // Two significant digits: an estimate is not exact to the disk.
     let scale = 10u64.pow(fits.max(1).ilog10().saturating_sub(1));
     let fits = fits / scale * scale;
@@ -132,7 +132,7 @@ fn duration_text(seconds: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::spec::{BASE_BYTES, EVENT_BYTES_PER_DISK, STEP_BYTES_PER_DISK};
+    use crate::run::spec::{BASE_BYTES, EVENT_BYTES_PER_DISK, STEP_BYTES_PER_DISK};
 
     const LAPTOP: Machine = Machine {
         logical_cores: 2,

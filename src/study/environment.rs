@@ -4,7 +4,7 @@
 
 use std::process::Command;
 
-use crate::backend::{machine_cores, usable_cpus};
+use crate::system::machine::{machine_cores, machine_memory_bytes, usable_cpus};
 
 /// Facts recorded beside every measurement of a study.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -14,7 +14,7 @@ pub struct Environment {
     pub logical_cores: usize,
     pub physical_cores: usize,
     /// The CPUs this process may run on (affinity and quota, see
-    /// [`crate::backend::usable_cpus`]); 0 where not recorded (older baselines).
+    /// [`crate::system::machine::usable_cpus`]); 0 where not recorded (older baselines).
     #[serde(default)]
     pub usable_cpus: usize,
     /// The affinity mask as the kernel lists it (`Cpus_allowed_list`, e.g. `0-3`).
@@ -62,7 +62,7 @@ impl Environment {
                 .lines()
                 .find_map(|line| line.strip_prefix("Cpus_allowed_list:"))
                 .map_or_else(|| UNKNOWN.to_owned(), |list| list.trim().to_owned()),
-            memory_bytes: memory_bytes(&read("/proc/meminfo")).unwrap_or(0),
+            memory_bytes: machine_memory_bytes().unwrap_or(0),
             os: os_name(),
             rustc: env!("COLLIDE_RUSTC_VERSION").to_owned(),
             profile: if cfg!(debug_assertions) {
@@ -82,16 +82,6 @@ impl Environment {
             load_average_start: load_average(),
         }
     }
-}
-
-/// The machine's memory (`MemTotal`), if known.
-pub fn machine_memory_bytes() -> Option<u64> {
-    memory_bytes(&read("/proc/meminfo"))
-}
-
-/// The memory limit of this process's control group (cgroup v2 `memory.max`), if any.
-pub fn memory_limit_bytes() -> Option<u64> {
-    read("/sys/fs/cgroup/memory.max").trim().parse().ok()
 }
 
 /// The 1-minute load average now (NaN where unknown).
@@ -143,12 +133,6 @@ fn physical_cores(cpuinfo: &str) -> Option<usize> {
     (!cores.is_empty()).then_some(cores.len())
 }
 
-fn memory_bytes(meminfo: &str) -> Option<u64> {
-    let line = meminfo.lines().find(|line| line.starts_with("MemTotal:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
-}
-
 fn os_name() -> String {
     let release = read("/etc/os-release");
     let pretty = release
@@ -167,14 +151,10 @@ mod tests {
     use super::*;
 
     #[test]
-    fn cpuinfo_and_meminfo_are_read_as_the_kernel_writes_them() {
+    fn cpuinfo_is_read_as_the_kernel_writes_it() {
         let cpuinfo = "processor\t: 0\nphysical id\t: 0\ncore id\t: 0\n\n\
                        processor\t: 1\nphysical id\t: 0\ncore id\t: 0\n\n\
                        processor\t: 2\nphysical id\t: 0\ncore id\t: 1\n";
         assert_eq!(physical_cores(cpuinfo), Some(2));
-        assert_eq!(
-            memory_bytes("MemTotal:       24576 kB\nMemFree: 1 kB\n"),
-            Some(24576 * 1024)
-        );
     }
 }

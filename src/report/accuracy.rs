@@ -2,15 +2,15 @@
 //! TC time, each point's errors against the event-driven reference at the same packing,
 //! the Pareto front of speed against error, and for e < 1 the cooling curves against
 //! Haff's law with where each run broke down. Pure: records in, numbers out; the report
-//! and `accuracy_figures` present them.
+//! and `figures` present them.
 
 use std::collections::BTreeMap;
 
-use crate::records::{Record, STATUS_OK};
-use crate::results::median;
+use crate::stats::median;
+use crate::study::records::{Record, STATUS_OK};
 
 /// A missed-collision fraction above this is a failed step (the stability map's boundary;
-/// the default tolerance of `dt = "auto"`, [`crate::auto::DEFAULT_MISSED_TOLERANCE`]).
+/// the default tolerance of `dt = "auto"`, [`crate::run::spec::DEFAULT_MISSED_TOLERANCE`]).
 pub const FAILURE_MISSED_FRACTION: f64 = 1e-3;
 
 /// A run whose disks went deeper into a wall than this fraction of their radius is
@@ -199,8 +199,8 @@ pub fn pareto_front(points: &[(f64, f64)]) -> Vec<bool> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::environment::Environment;
-    use crate::records::RecordContext;
+    use crate::study::environment::Environment;
+    use crate::study::records::RecordContext;
 
     /// A successful record with nothing measured yet.
     fn blank_ok() -> Record {
@@ -223,7 +223,7 @@ mod tests {
         };
         let context = RecordContext {
             study: "accuracy",
-            ..crate::records::serial_context(&environment)
+            ..crate::study::records::serial_context(&environment)
         };
         let mut record = Record::failed(&context, STATUS_OK, String::new());
         record.status = STATUS_OK.to_owned();

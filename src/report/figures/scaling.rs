@@ -1,18 +1,18 @@
-//! The report's figures (PNG, plotters): time, speedup, efficiency and steps per second
+//! The scaling figures of one setup: time, speedup, efficiency and steps per second
 //! against workers, one colour per backend in every figure, error bars from the
-//! repetitions, log axes. Text uses an embedded DejaVu Sans, so no system font is needed.
+//! repetitions, log axes.
 
 use std::path::{Path, PathBuf};
-use std::sync::Once;
 
 use anyhow::anyhow;
 use plotters::prelude::*;
 
-use crate::analysis::{BackendScaling, Setup};
-use crate::manifest::Scaling;
-use crate::output::{Canvas, write_png};
+use crate::report::analysis::{BackendScaling, Setup};
+use crate::report::figures::{Chart, FONT, PALETTE, draw_legend, write};
+use crate::run::backend_kind::BackendKind;
+use crate::study::manifest::Scaling;
+use crate::system::output::Canvas;
 
-pub(crate) const FONT: &str = "sans-serif";
 const SIZE: (u32, u32) = (900, 560);
 
 /// What a figure plots against workers.
@@ -75,7 +75,7 @@ impl Figure {
     }
 
     /// (low, median, high) of one point.
-    fn values(self, point: &crate::analysis::Point) -> (f64, f64, f64) {
+    fn values(self, point: &crate::report::analysis::Point) -> (f64, f64, f64) {
         match self {
             Figure::Time => (point.min_s, point.median_s, point.max_s),
             Figure::Speedup => (point.speedup, point.speedup, point.speedup),
@@ -85,34 +85,54 @@ impl Figure {
     }
 }
 
-/// The palette of series: backends, or the accuracy study's packings by index.
-pub(crate) const PALETTE: [RGBColor; 4] = [
-    RGBColor(0x1f, 0x77, 0xb4),
-    RGBColor(0xd6, 0x27, 0x28),
-    RGBColor(0x2c, 0xa0, 0x2c),
-    RGBColor(0x33, 0x33, 0x33),
-];
+/// One scaling figure of one setup, drawn as `<prefix>-<figure>.png`.
+pub struct ScalingChart<'a> {
+    pub figure: Figure,
+    pub setup: &'a Setup,
+    pub prefix: &'a str,
+}
 
-/// One colour per backend, the same in every figure.
-fn colour(backend: &str) -> RGBColor {
-    match backend {
-        "serial" => PALETTE[3],
-        "rayon" => PALETTE[0],
-        "mpi" => PALETTE[1],
-        _ => PALETTE[2],
+impl Chart for ScalingChart<'_> {
+    fn file_name(&self) -> String {
+        format!("{}-{}.png", self.prefix, self.figure.file_stem())
+    }
+
+    fn size(&self) -> (u32, u32) {
+        SIZE
+    }
+
+    fn draw(&self, canvas: &Canvas<'_>) -> anyhow::Result<()> {
+        draw(self.figure, self.setup, canvas)
     }
 }
 
-/// DejaVu Sans (assets/DejaVuSans-LICENSE.txt), embedded once for figures and the live view.
-pub(crate) const FONT_BYTES: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+/// Draws every figure of `setup` into `dir` as `<prefix>-<figure>.png`; returns the paths.
+pub fn draw_setup(
+    setup: &Setup,
+    dir: &Path,
+    prefix: &str,
+) -> anyhow::Result<Vec<(Figure, PathBuf)>> {
+    Figure::ALL
+        .into_iter()
+        .map(|figure| {
+            let chart = ScalingChart {
+                figure,
+                setup,
+                prefix,
+            };
+            Ok((figure, write(&chart, dir)?))
+        })
+        .collect()
+}
 
-pub(crate) fn register_font() {
-    static FONT_ONCE: Once = Once::new();
-    FONT_ONCE.call_once(|| {
-        // The embedded font is valid; failing here would be a build defect.
-        plotters::style::register_font(FONT, FontStyle::Normal, FONT_BYTES)
-            .unwrap_or_else(|_| panic!("the embedded DejaVu Sans is a valid font"));
-    });
+/// One colour per backend, the same in every figure.
+fn colour(backend: &str) -> RGBColor {
+    match BackendKind::from_name(backend) {
+        Some(BackendKind::Serial) => PALETTE[3],
+        Some(BackendKind::Rayon) => PALETTE[0],
+        Some(BackendKind::Mpi) => PALETTE[1],
+        None => PALETTE[2],
+    }
 }
 
 /// Ticks of a log axis over `low..high` at 1, 2 and 5 times the powers of ten, so that a
@@ -142,22 +162,6 @@ const MAX_LOG_TICKS: usize = 8;
 fn tick_label(value: f64) -> String {
     let decimals = (-value.log10().floor()).max(0.0) as usize;
     format!("{value:.decimals$}")
-}
-
-/// Draws every figure of `setup` into `dir` as `<prefix>-<figure>.png`; returns the paths.
-pub fn draw_setup(
-    setup: &Setup,
-    dir: &Path,
-    prefix: &str,
-) -> anyhow::Result<Vec<(Figure, PathBuf)>> {
-    register_font();
-    let mut drawn = Vec::new();
-    for figure in Figure::ALL {
-        let path = dir.join(format!("{prefix}-{}.png", figure.file_stem()));
-        write_png(&path, SIZE, |canvas| draw(figure, setup, canvas))?;
-        drawn.push((figure, path));
-    }
-    Ok(drawn)
 }
 
 fn draw(figure: Figure, setup: &Setup, root: &Canvas<'_>) -> anyhow::Result<()> {
@@ -285,26 +289,6 @@ fn draw(figure: Figure, setup: &Setup, root: &Canvas<'_>) -> anyhow::Result<()> 
             .map_err(|e| anyhow!("{e}"))?;
     }
     draw_legend(&mut chart, figure.legend_position(), 15)
-}
-
-/// The series labels of every figure: framed, on a translucent white, at `position`.
-pub(crate) fn draw_legend<'a, DB, CT>(
-    chart: &mut ChartContext<'a, DB, CT>,
-    position: SeriesLabelPosition,
-    font_size: u32,
-) -> anyhow::Result<()>
-where
-    DB: DrawingBackend + 'a,
-    CT: CoordTranslate,
-{
-    chart
-        .configure_series_labels()
-        .position(position)
-        .label_font((FONT, font_size))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| anyhow!("{e}"))
 }
 
 #[cfg(test)]

@@ -12,12 +12,12 @@ use std::time::Duration;
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::cli::BackendName;
-use crate::limits::{Machine, WorkerSource, check_memory, check_workers};
-use crate::names::check_name;
-use crate::scene_file::{self, DtValue, Overrides};
-use crate::sim::Broadphase;
-use crate::spec::{Footprint, MethodChoice, Observe, RunSpec, SceneSource};
+use crate::run::backend_kind::BackendKind;
+use crate::run::limits::{Machine, WorkerSource, check_memory, check_workers};
+use crate::run::overrides::{Overrides, SweepLists, SweptList};
+use crate::run::scene_file;
+use crate::run::spec::{Footprint, RunSpec, SceneSource};
+use crate::study::names::check_name;
 
 /// A validated study: what to run, how often, and in which order.
 #[derive(Clone, Debug, PartialEq)]
@@ -68,10 +68,10 @@ pub struct Configuration {
     pub scene: String,
     pub input: SceneInput,
     pub overrides: Overrides,
-    pub backend: BackendName,
+    pub backend: BackendKind,
     /// Threads (rayon), ranks (MPI) or 1 (serial).
     pub workers: usize,
-    /// Run worker counts above the ceiling of [`crate::limits`] (`[backends]
+    /// Run worker counts above the ceiling of [`crate::run::limits`] (`[backends]
     /// oversubscribe = true`); not part of the key.
     pub oversubscribe: bool,
     /// Memory and placement time of each of its runs, as checked against the machine.
@@ -82,49 +82,27 @@ impl Configuration {
     /// A stable text key naming the configuration: the same in every run of the same
     /// manifest, so `--resume` can tell what is already measured.
     pub fn key(&self) -> String {
-        let o = &self.overrides;
-        let dt = match &o.dt {
-            Some(DtValue::Seconds(dt)) => dt.to_string(),
-            Some(DtValue::Word(word)) => word.clone(),
-            None => "-".to_owned(),
-        };
-        let show = |value: Option<String>| value.unwrap_or_else(|| "-".to_owned());
-        // Method, observe and tc join the key only when swept, so the keys of manifests
-        // written before they could be swept (and their `--resume`) stay as they were.
-        let mut swept = String::new();
-        if let Some(method) = o.method {
-            swept.push_str(&format!(";method={}", method.name()));
-        }
-        if let Some(observe) = o.observe {
-            swept.push_str(&format!(";observe={}", observe.name()));
-        }
-        if let Some(tc) = o.tc {
-            swept.push_str(&format!(";tc={tc}"));
+        let entries = self.overrides.entries();
+        let mut always = Vec::new();
+        let mut when_set = String::new();
+        for (name, value) in entries {
+            if Overrides::ALWAYS_KEYED.contains(&name) {
+                always.push(format!("{name}={}", value.as_deref().unwrap_or("-")));
+            } else if let Some(value) = value {
+                when_set.push_str(&format!(";{name}={value}"));
+            }
         }
         format!(
-            "scene={};n={};packing={};dt={dt};steps={};seed={};broadphase={};backend={};workers={}{swept}",
+            "scene={};{};backend={};workers={}{when_set}",
             self.scene,
-            show(o.n.map(|n| n.to_string())),
-            show(o.packing.map(|p| p.to_string())),
-            show(o.steps.map(|s| s.to_string())),
-            show(o.seed.map(|s| s.to_string())),
-            show(o.broadphase.map(|b| b.name().to_owned())),
-            self.backend_name(),
+            always.join(";"),
+            self.backend.name(),
             self.workers
         )
     }
 
-    pub fn backend_name(&self) -> &'static str {
-        match self.backend {
-            BackendName::Serial => "serial",
-            BackendName::Rayon => "rayon",
-            BackendName::Mpi => "mpi",
-        }
-    }
-
     /// The `collide simulate` arguments after the scene path.
     pub fn simulate_args(&self) -> Vec<String> {
-        let o = &self.overrides;
         let mut args = vec!["--json".to_owned()];
         let mut push = |flag: &str, value: Option<String>| {
             if let Some(value) = value {
@@ -132,26 +110,12 @@ impl Configuration {
                 args.push(value);
             }
         };
-        push("--n", o.n.map(|n| n.to_string()));
-        push("--steps", o.steps.map(|s| s.to_string()));
-        push("--seed", o.seed.map(|s| s.to_string()));
-        push(
-            "--dt",
-            o.dt.as_ref().map(|dt| match dt {
-                DtValue::Seconds(dt) => dt.to_string(),
-                DtValue::Word(word) => word.clone(),
-            }),
-        );
-        push("--packing", o.packing.map(|p| p.to_string()));
-        push("--broadphase", o.broadphase.map(|b| b.name().to_owned()));
-        push("--method", o.method.map(|m| m.name().to_owned()));
-        push("--observe", o.observe.map(|m| m.name().to_owned()));
-        push("--tc", o.tc.map(|tc| tc.to_string()));
-        push("--backend", Some(self.backend_name().to_owned()));
-        match self.backend {
-            BackendName::Serial => {}
-            BackendName::Rayon => push("--threads", Some(self.workers.to_string())),
-            BackendName::Mpi => push("--ranks", Some(self.workers.to_string())),
+        for (name, value) in self.overrides.entries() {
+            push(&format!("--{name}"), value);
+        }
+        push("--backend", Some(self.backend.name().to_owned()));
+        if let Some(flag) = self.backend.workers_flag() {
+            push(flag, Some(self.workers.to_string()));
         }
         if self.oversubscribe {
             args.push("--oversubscribe".to_owned());
@@ -178,7 +142,7 @@ struct RawManifest {
     scaling: Option<Spanned<Scaling>>,
     scenes: Spanned<Vec<Spanned<RawScene>>>,
     #[serde(default)]
-    sweep: RawSweep,
+    sweep: SweepLists,
     backends: Spanned<RawBackends>,
 }
 
@@ -191,22 +155,6 @@ struct RawScene {
     method: Option<toml::Table>,
 }
 
-#[derive(Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawSweep {
-    n: Option<Spanned<Vec<i64>>>,
-    packing: Option<Spanned<Vec<f64>>>,
-    dt: Option<Spanned<Vec<DtValue>>>,
-    steps: Option<Spanned<Vec<i64>>>,
-    seed: Option<Spanned<Vec<u64>>>,
-    broadphase: Option<Spanned<Vec<Broadphase>>>,
-    method: Option<Spanned<Vec<MethodChoice>>>,
-    observe: Option<Spanned<Vec<Observe>>>,
-    tc: Option<Spanned<Vec<f64>>>,
-    /// Keys whose lists pair up element by element instead of multiplying.
-    zip: Option<Spanned<Vec<String>>>,
-}
-
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawBackends {
@@ -216,7 +164,7 @@ struct RawBackends {
     rayon: Vec<i64>,
     #[serde(default)]
     mpi: Vec<i64>,
-    /// Allow worker counts above the ceiling of [`crate::limits`].
+    /// Allow worker counts above the ceiling of [`crate::run::limits`].
     #[serde(default)]
     oversubscribe: bool,
 }
@@ -317,14 +265,14 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
                 };
                 let spec = load_scene(&input, &overrides).map_err(in_scene)?;
                 // Every rank of an MPI run builds all the disks.
-                let copies = if backend == BackendName::Mpi {
+                let copies = if backend == BackendKind::Mpi {
                     workers
                 } else {
                     1
                 };
                 let footprint = spec.footprint(copies);
                 check_memory(&footprint, machine).map_err(in_scene)?;
-                if spec.method.method.may_be_event() && backend != BackendName::Serial {
+                if spec.method.method.may_be_event() && backend != BackendKind::Serial {
                     let at = raw
                         .sweep
                         .method
@@ -375,15 +323,16 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
 
 /// (backend, workers) pairs, in manifest order, each within the worker ceiling of
 /// `machine` unless `oversubscribe` is set.
-fn backend_list(raw: &RawBackends, machine: &Machine) -> Result<Vec<(BackendName, usize)>, String> {
+fn backend_list(raw: &RawBackends, machine: &Machine) -> Result<Vec<(BackendKind, usize)>, String> {
     let mut list = Vec::new();
     if raw.serial {
-        list.push((BackendName::Serial, 1));
+        list.push((BackendKind::Serial, 1));
     }
-    for (backend, field, counts) in [
-        (BackendName::Rayon, "rayon", &raw.rayon),
-        (BackendName::Mpi, "mpi", &raw.mpi),
+    for (backend, counts) in [
+        (BackendKind::Rayon, &raw.rayon),
+        (BackendKind::Mpi, &raw.mpi),
     ] {
+        let field = backend.name();
         for &count in counts {
             if count < 1 {
                 return Err(format!(
@@ -409,36 +358,12 @@ fn backend_list(raw: &RawBackends, machine: &Machine) -> Result<Vec<(BackendName
 
 /// The sweep's points: the full product of its lists, except that the lists named in
 /// `zip` pair up element by element (and must have the same length).
-fn sweep_points(sweep: &RawSweep) -> Result<Vec<Overrides>, (usize, String)> {
-    type Setter = Box<dyn Fn(&mut Overrides, usize)>;
-    // (key, span start, length, how to apply element i)
-    let mut lists: Vec<(&str, usize, usize, Setter)> = Vec::new();
-    macro_rules! list {
-        ($key:literal, $field:ident, $convert:expr) => {
-            if let Some(values) = &sweep.$field {
-                let owned = values.get_ref().clone();
-                let convert = $convert;
-                lists.push((
-                    $key,
-                    values.span().start,
-                    owned.len(),
-                    Box::new(move |o: &mut Overrides, i: usize| {
-                        o.$field = Some(convert(owned[i].clone()))
-                    }),
-                ));
-            }
-        };
-    }
-    list!("n", n, |v: i64| v);
-    list!("packing", packing, |v: f64| v);
-    list!("dt", dt, |v: DtValue| v);
-    list!("steps", steps, |v: i64| v);
-    list!("seed", seed, |v: u64| v);
-    list!("broadphase", broadphase, |v: Broadphase| v);
-    list!("method", method, |v: MethodChoice| v);
-    list!("observe", observe, |v: Observe| v);
-    list!("tc", tc, |v: f64| v);
-    for (key, offset, len, _) in &lists {
+fn sweep_points(sweep: &SweepLists) -> Result<Vec<Overrides>, (usize, String)> {
+    let lists = sweep.lists();
+    for SweptList {
+        key, offset, len, ..
+    } in &lists
+    {
         if *len == 0 {
             return Err((
                 *offset,
@@ -450,7 +375,7 @@ fn sweep_points(sweep: &RawSweep) -> Result<Vec<Overrides>, (usize, String)> {
     let zipped = sweep.zip.as_ref().map_or(&no_zip, |zip| zip.get_ref());
     let zip_offset = sweep.zip.as_ref().map_or(0, |zip| zip.span().start);
     for key in zipped {
-        if !lists.iter().any(|(k, ..)| k == key) {
+        if !lists.iter().any(|list| list.key == key) {
             return Err((
                 zip_offset,
                 format!("`sweep.zip` names `{key}`, which is not a swept list here"),
@@ -459,35 +384,35 @@ fn sweep_points(sweep: &RawSweep) -> Result<Vec<Overrides>, (usize, String)> {
     }
     let (paired, free): (Vec<_>, Vec<_>) = lists
         .into_iter()
-        .partition(|(key, ..)| zipped.iter().any(|z| z == key));
+        .partition(|list| zipped.iter().any(|z| z == list.key));
     let mut points = vec![Overrides::default()];
-    if let Some((_, _, len, _)) = paired.first() {
-        if let Some((key, ..)) = paired.iter().find(|(_, _, l, _)| l != len) {
+    if let Some(SweptList { len, .. }) = paired.first() {
+        if let Some(SweptList { key, .. }) = paired.iter().find(|list| list.len != *len) {
             return Err((
                 zip_offset,
                 format!(
                     "`sweep.zip` pairs lists of different lengths (`{key}` has another length than `{}`); give them the same length",
-                    paired[0].0
+                    paired[0].key
                 ),
             ));
         }
         points = (0..*len)
             .map(|i| {
                 let mut o = Overrides::default();
-                for (_, _, _, set) in &paired {
-                    set(&mut o, i);
+                for list in &paired {
+                    (list.set)(&mut o, i);
                 }
                 o
             })
             .collect();
     }
-    for (_, _, len, set) in &free {
+    for list in &free {
         points = points
             .iter()
             .flat_map(|point| {
-                (0..*len).map(move |i| {
+                (0..list.len).map(move |i| {
                     let mut o = point.clone();
-                    set(&mut o, i);
+                    (list.set)(&mut o, i);
                     o
                 })
             })
@@ -539,11 +464,10 @@ fn load_scene(input: &SceneInput, overrides: &Overrides) -> Result<RunSpec, Stri
 }
 
 /// The `backends` entry that names a backend, e.g. `rayon = [...]`.
-fn backend_label(backend: BackendName) -> &'static str {
-    match backend {
-        BackendName::Serial => "`serial = true`",
-        BackendName::Rayon => "`rayon = [...]`",
-        BackendName::Mpi => "`mpi = [...]`",
+fn backend_label(backend: BackendKind) -> String {
+    match backend.workers_flag() {
+        None => format!("`{} = true`", backend.name()),
+        Some(_) => format!("`{} = [...]`", backend.name()),
     }
 }
 
@@ -561,25 +485,11 @@ fn per_worker_n(input: &SceneInput, overrides: &Overrides) -> Result<i64, String
 }
 
 fn describe(o: &Overrides) -> String {
-    let mut parts = Vec::new();
-    if let Some(n) = o.n {
-        parts.push(format!("n = {n}"));
-    }
-    if let Some(p) = o.packing {
-        parts.push(format!("packing = {p}"));
-    }
-    if let Some(s) = o.steps {
-        parts.push(format!("steps = {s}"));
-    }
-    if let Some(m) = o.method {
-        parts.push(format!("method = {}", m.name()));
-    }
-    if let Some(o) = o.observe {
-        parts.push(format!("observe = {}", o.name()));
-    }
-    if let Some(tc) = o.tc {
-        parts.push(format!("tc = {tc}"));
-    }
+    let parts: Vec<String> = o
+        .entries()
+        .into_iter()
+        .filter_map(|(name, value)| Some(format!("{name} = {}", value?)))
+        .collect();
     if parts.is_empty() {
         "its own settings".into()
     } else {
@@ -594,7 +504,7 @@ fn line_of(text: &str, offset: usize) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::spec::Method;
+    use crate::run::spec::{Method, MethodChoice, Observe};
 
     const INLINE: &str = "[[scenes]]\nname = \"gas\"\n[scenes.scene]\nn = 100\npacking = 0.1\n\
                           [scenes.method]\ndt = 0.1\nsteps = 10\n";
@@ -622,7 +532,7 @@ mod tests {
                 (
                     c.overrides.n,
                     c.overrides.packing,
-                    c.backend_name().to_owned(),
+                    c.backend.name().to_owned(),
                     c.workers,
                 )
             })

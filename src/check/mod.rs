@@ -5,6 +5,8 @@
 //! `--update-baseline`. Verdicts come from `stats`; instruction counts of the serial path
 //! under callgrind, where valgrind is installed, are a second, noise-free signal.
 
+pub mod calibrate;
+
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -13,15 +15,15 @@ use std::process::Command;
 use anyhow::{Context, bail};
 use serde::{Deserialize, Serialize};
 
-use crate::cli::BackendName;
-use crate::environment::Environment;
 use crate::exit::RunsFailed;
-use crate::manifest::{self, Configuration};
-use crate::output::write_atomically;
-use crate::records::{self, Record, STATUS_OK};
-use crate::results::median;
-use crate::runner::{self, Calibration, RunOptions};
+use crate::run::backend_kind::BackendKind;
+use crate::stats::median;
 use crate::stats::{self, Interval, Verdict};
+use crate::study::environment::Environment;
+use crate::study::manifest::{self, Configuration};
+use crate::study::records::{self, Record, STATUS_OK};
+use crate::study::runner::{self, Calibration, RunOptions};
+use crate::system::output::write_atomically;
 
 /// How to run a check.
 #[derive(Clone, Debug)]
@@ -166,7 +168,7 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
     let serial = study
         .configurations
         .iter()
-        .find(|c| c.backend == BackendName::Serial);
+        .find(|c| c.backend == BackendKind::Serial);
     let instructions = match serial {
         Some(configuration) => count_instructions(
             configuration,
@@ -469,7 +471,7 @@ fn count_instructions(
         _ => bail!(
             "callgrind of `collide {}` failed{}",
             command.join(" "),
-            crate::process::tail("its output", &stderr)
+            crate::system::process::tail("its output", &stderr)
         ),
     }
 }
@@ -504,34 +506,6 @@ fn summary(
             (n, _) => format!("{n} REGRESSED"),
         }
     );
-    let describe = |info: &BaselineInfo| {
-        let env = &info.environment;
-        let calibration = |pick: fn(&Calibration) -> Option<f64>| {
-            let mut values: Vec<f64> = info.calibrations.iter().filter_map(pick).collect();
-            match values.is_empty() {
-                true => "—".to_owned(),
-                false => format!("{:.4} s", median(&mut values)),
-            }
-        };
-        format!(
-            "{} on {} ({}, {} logical cores), commit {}{}, recorded {}{}; calibration median \
-             {} CPU, {} wall over {} rounds",
-            env.profile,
-            env.hostname,
-            env.cpu_model,
-            env.logical_cores,
-            env.git_commit,
-            if env.git_dirty { " (dirty)" } else { "" },
-            info.recorded_utc,
-            match info.inject_slowdown > 0.0 {
-                true => format!(", with an injected slowdown of {}", info.inject_slowdown),
-                false => String::new(),
-            },
-            calibration(|c| c.calibration_cpu_s),
-            calibration(|c| Some(c.calibration_s)),
-            info.calibrations.len()
-        )
-    };
     let _ = writeln!(out, "- manifest: `{}`", options.manifest.display());
     let _ = writeln!(
         out,
@@ -540,6 +514,63 @@ fn summary(
         describe(old_info)
     );
     let _ = writeln!(out, "- this run: {}", describe(new_info));
+    write_method(&mut out, options, old_info, timings_decide);
+    write_table(&mut out, rows);
+    if new_info.instructions.is_none() {
+        let _ = writeln!(
+            out,
+            "\nNo instruction counts: valgrind is not installed on this machine."
+        );
+    }
+    let _ = writeln!(
+        out,
+        "\nverdict: {regressed} regressed, {improved} improved, {} unchanged{}",
+        rows.len() - regressed - improved - advisory,
+        match advisory {
+            0 => String::new(),
+            n => format!(", {n} timing regression(s) not judged (another machine)"),
+        }
+    );
+    out
+}
+
+/// Where and how a set of records was measured, for the summary's header.
+fn describe(info: &BaselineInfo) -> String {
+    let env = &info.environment;
+    let calibration = |pick: fn(&Calibration) -> Option<f64>| {
+        let mut values: Vec<f64> = info.calibrations.iter().filter_map(pick).collect();
+        match values.is_empty() {
+            true => "—".to_owned(),
+            false => format!("{:.4} s", median(&mut values)),
+        }
+    };
+    format!(
+        "{} on {} ({}, {} logical cores), commit {}{}, recorded {}{}; calibration median \
+         {} CPU, {} wall over {} rounds",
+        env.profile,
+        env.hostname,
+        env.cpu_model,
+        env.logical_cores,
+        env.git_commit,
+        if env.git_dirty { " (dirty)" } else { "" },
+        info.recorded_utc,
+        match info.inject_slowdown > 0.0 {
+            true => format!(", with an injected slowdown of {}", info.inject_slowdown),
+            false => String::new(),
+        },
+        calibration(|c| c.calibration_cpu_s),
+        calibration(|c| Some(c.calibration_s)),
+        info.calibrations.len()
+    )
+}
+
+/// The summary's lines on what is measured, how it is compared and what decides.
+fn write_method(
+    out: &mut String,
+    options: &CheckOptions,
+    old_info: &BaselineInfo,
+    timings_decide: bool,
+) {
     let _ = writeln!(
         out,
         "- measure: the CPU seconds of each run's stepping loop (`cpu_s`, summed over threads \
@@ -575,6 +606,10 @@ fn summary(
             ),
         }
     );
+}
+
+/// The summary's table: one row per configuration and measure.
+fn write_table(out: &mut String, rows: &[Row]) {
     let _ = writeln!(
         out,
         "| configuration | measure | baseline median | median now | ratio | {:.0}% interval | verdict | wall ratio (interval) | note |",
@@ -607,22 +642,6 @@ fn summary(
             row.note
         );
     }
-    if new_info.instructions.is_none() {
-        let _ = writeln!(
-            out,
-            "\nNo instruction counts: valgrind is not installed on this machine."
-        );
-    }
-    let _ = writeln!(
-        out,
-        "\nverdict: {regressed} regressed, {improved} improved, {} unchanged{}",
-        rows.len() - regressed - improved - advisory,
-        match advisory {
-            0 => String::new(),
-            n => format!(", {n} timing regression(s) not judged (another machine)"),
-        }
-    );
-    out
 }
 
 #[cfg(test)]

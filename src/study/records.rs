@@ -10,10 +10,11 @@ use polars::prelude::{
     Column, DataFrame, ParquetCompression, ParquetReader, ParquetWriter, PolarsResult, SerReader,
 };
 
-use crate::environment::Environment;
-use crate::manifest::Scaling;
-use crate::output::write_atomically;
-use crate::summary::RunSummary;
+use crate::run::backend_kind::BackendKind;
+use crate::run::summary::RunSummary;
+use crate::study::environment::Environment;
+use crate::study::manifest::Scaling;
+use crate::system::output::write_atomically;
 
 pub const SCHEMA_VERSION: u32 = 6;
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
@@ -71,112 +72,6 @@ pub const STATUS_OK: &str = "ok";
 pub const STATUS_FAILED: &str = "failed";
 pub const STATUS_TIMED_OUT: &str = "timed_out";
 
-/// One repetition of one configuration. Failed runs keep their row, with NaN
-/// measurements, zero counts, an empty `state_hash` and the reason in `error`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Record {
-    pub study: String,
-    /// xxh3 of the manifest text: `--resume` only continues the same manifest.
-    pub manifest_hash: String,
-    /// Commit, dirty flag, profile and features: `--resume` only continues the same build.
-    pub build_id: String,
-    /// [`crate::manifest::Configuration::key`].
-    pub config_key: String,
-    pub scene: String,
-    /// `strong` (n fixed) or `weak` (n grows with the workers): how the study scaled.
-    pub scaling: String,
-    pub repetition: u32,
-    pub status: String,
-    pub error: String,
-    pub backend: String,
-    pub threads: u64,
-    pub ranks: u64,
-    pub workers: u64,
-    pub n: u64,
-    pub steps: u64,
-    pub dt: f64,
-    pub packing: f64,
-    pub seed: Option<u64>,
-    pub boundary: String,
-    pub broadphase: String,
-    pub wall_s: f64,
-    /// CPU seconds of the stepping loop, summed over threads and ranks (NaN: unknown).
-    pub cpu_s: f64,
-    pub setup_s: f64,
-    pub fps: f64,
-    pub particle_steps_per_s: f64,
-    pub integration_s: f64,
-    pub broad_phase_s: f64,
-    pub collision_s: f64,
-    pub communication_s: f64,
-    pub kinetic_energy_initial: f64,
-    pub kinetic_energy_final: f64,
-    pub momentum_initial_x: f64,
-    pub momentum_initial_y: f64,
-    pub momentum_final_x: f64,
-    pub momentum_final_y: f64,
-    pub pair_collisions: u64,
-    pub wall_collisions: u64,
-    pub max_overlap: f64,
-    /// Largest penetration into a wall, as a fraction of the radius (see the JSON summary).
-    pub max_wall_penetration: f64,
-    pub state_hash: String,
-    /// `step` or `event`; `timing` or `accuracy` (see the JSON summary).
-    pub method: String,
-    pub observe: String,
-    /// Accuracy observables of the JSON summary; NaN (floats) or null (counts) where
-    /// the summary has null.
-    pub events_per_s: f64,
-    pub collision_rate: f64,
-    pub temperature: f64,
-    pub pressure: f64,
-    pub compressibility_z: f64,
-    pub missed_collisions: Option<u64>,
-    pub missed_collision_fraction: f64,
-    pub mean_overlap: f64,
-    pub energy_relative_error: f64,
-    pub collapse_guard_fired: Option<u64>,
-    /// Event method: simulated time of the detected inelastic collapse (the run stopped
-    /// there, `steps` counting the interval it fell in); NaN when none, and for step.
-    pub collapse_time: f64,
-    /// Event method: the TC model time used (0: guard off); NaN for the step method.
-    pub tc: f64,
-    /// v_rms·dt/r_min at the start (see the JSON summary); NaN where not known.
-    pub rms_step_over_radius: f64,
-    /// What `method = "auto"` / `dt = "auto"` chose and why (the JSON summary's
-    /// `choice`); empty when nothing was automatic.
-    pub choice: String,
-    /// The JSON summary's `temperature_curve` as JSON text ([[t, T], ...]); empty where
-    /// it is null (elastic scenes, parallel backends).
-    pub temperature_curve: String,
-    pub oversubscribed: bool,
-    pub hostname: String,
-    pub cpu_model: String,
-    pub logical_cores: u64,
-    pub physical_cores: u64,
-    /// The CPUs the study could run on (affinity mask and quota); `oversubscribed` means
-    /// more workers than these. Null in files of schema version 5 and older.
-    pub usable_cpus: Option<u64>,
-    /// Those CPUs as the kernel lists them (e.g. `0-3`); "" in older files.
-    pub cpu_affinity: String,
-    pub memory_bytes: u64,
-    pub os: String,
-    pub rustc: String,
-    pub profile: String,
-    pub features: String,
-    pub git_commit: String,
-    pub git_dirty: bool,
-    pub mpi_library: String,
-    pub load_average_start: f64,
-    /// 1-minute load average when this row was written.
-    pub load_average: f64,
-    /// 1-minute load average when the study finished; NaN while it runs (or if killed).
-    pub load_average_end: f64,
-    /// UTC, RFC 3339: when the study started and when this run finished.
-    pub study_started_utc: String,
-    pub finished_utc: String,
-}
-
 /// The parts of a record that do not come from the run itself.
 #[derive(Clone, Debug)]
 pub struct RecordContext<'a> {
@@ -187,7 +82,7 @@ pub struct RecordContext<'a> {
     pub scene: &'a str,
     /// `strong` or `weak`.
     pub scaling: &'a str,
-    pub backend: &'a str,
+    pub backend: BackendKind,
     pub workers: u64,
     pub repetition: u32,
     pub environment: &'a Environment,
@@ -198,57 +93,9 @@ impl Record {
     /// The row of a run that finished and printed `summary`.
     pub fn measured(context: &RecordContext<'_>, summary: &RunSummary) -> Record {
         let mut record = Record::blank(context, STATUS_OK, String::new());
-        record.threads = summary.threads as u64;
-        record.ranks = summary.ranks as u64;
-        record.workers = summary.workers as u64;
-        record.n = summary.n as u64;
-        record.steps = summary.steps;
-        record.dt = summary.dt;
-        record.packing = summary.packing;
-        record.seed = summary.seed;
-        record.boundary = summary.boundary.clone();
-        record.broadphase = summary.broadphase.clone();
-        record.wall_s = summary.wall_s;
-        record.cpu_s = summary.cpu_s.unwrap_or(f64::NAN);
-        record.setup_s = summary.setup_s;
-        record.fps = summary.fps;
-        record.particle_steps_per_s = summary.particle_steps_per_s;
-        record.integration_s = summary.integration_s;
-        record.broad_phase_s = summary.broad_phase_s;
-        record.collision_s = summary.collision_s;
-        record.communication_s = summary.communication_s;
-        record.kinetic_energy_initial = summary.kinetic_energy_initial;
-        record.kinetic_energy_final = summary.kinetic_energy_final;
+        record.copy_run(summary);
         [record.momentum_initial_x, record.momentum_initial_y] = summary.momentum_initial;
         [record.momentum_final_x, record.momentum_final_y] = summary.momentum_final;
-        record.pair_collisions = summary.pair_collisions;
-        record.wall_collisions = summary.wall_collisions;
-        record.max_overlap = summary.max_overlap;
-        record.max_wall_penetration = summary.max_wall_penetration;
-        record.state_hash = summary.state_hash.clone();
-        record.method = summary.method.clone();
-        record.observe = summary.observe.clone();
-        let nan = |value: Option<f64>| value.unwrap_or(f64::NAN);
-        record.events_per_s = nan(summary.events_per_s);
-        record.collision_rate = nan(summary.collision_rate);
-        record.temperature = nan(summary.temperature);
-        record.pressure = nan(summary.pressure);
-        record.compressibility_z = nan(summary.compressibility_z);
-        record.missed_collisions = summary.missed_collisions;
-        record.missed_collision_fraction = nan(summary.missed_collision_fraction);
-        record.mean_overlap = nan(summary.mean_overlap);
-        record.energy_relative_error = nan(summary.energy_relative_error);
-        record.collapse_guard_fired = summary.collapse_guard_fired;
-        record.collapse_time = nan(summary.collapse_time);
-        record.tc = nan(summary.tc);
-        record.rms_step_over_radius = nan(summary.rms_step_over_radius);
-        record.choice = summary.choice.clone().unwrap_or_default();
-        record.temperature_curve = summary
-            .temperature_curve
-            .as_ref()
-            .and_then(|curve| serde_json::to_string(curve).ok())
-            .unwrap_or_default();
-        record.oversubscribed = summary.oversubscribed;
         record
     }
 
@@ -257,14 +104,13 @@ impl Record {
         Record::blank(context, status, error)
     }
 
+    /// A row with the context and the environment, and nothing measured: NaN, zero, ""
+    /// or null in every column of the run.
     fn blank(context: &RecordContext<'_>, status: &str, error: String) -> Record {
         let env = context.environment;
         let workers = context.workers;
-        let (threads, ranks) = match context.backend {
-            "rayon" => (workers, 1),
-            "mpi" => (1, workers),
-            _ => (1, 1),
-        };
+        let (threads, ranks) = context.backend.split(workers as usize);
+        let (threads, ranks) = (threads as u64, ranks as u64);
         Record {
             study: context.study.to_owned(),
             manifest_hash: context.manifest_hash.to_owned(),
@@ -275,54 +121,10 @@ impl Record {
             repetition: context.repetition,
             status: status.to_owned(),
             error,
-            backend: context.backend.to_owned(),
+            backend: context.backend.name().to_owned(),
             threads,
             ranks,
             workers,
-            n: 0,
-            steps: 0,
-            dt: f64::NAN,
-            packing: f64::NAN,
-            seed: None,
-            boundary: String::new(),
-            broadphase: String::new(),
-            wall_s: f64::NAN,
-            cpu_s: f64::NAN,
-            setup_s: f64::NAN,
-            fps: f64::NAN,
-            particle_steps_per_s: f64::NAN,
-            integration_s: f64::NAN,
-            broad_phase_s: f64::NAN,
-            collision_s: f64::NAN,
-            communication_s: f64::NAN,
-            kinetic_energy_initial: f64::NAN,
-            kinetic_energy_final: f64::NAN,
-            momentum_initial_x: f64::NAN,
-            momentum_initial_y: f64::NAN,
-            momentum_final_x: f64::NAN,
-            momentum_final_y: f64::NAN,
-            pair_collisions: 0,
-            wall_collisions: 0,
-            max_overlap: f64::NAN,
-            max_wall_penetration: f64::NAN,
-            state_hash: String::new(),
-            method: String::new(),
-            observe: String::new(),
-            events_per_s: f64::NAN,
-            collision_rate: f64::NAN,
-            temperature: f64::NAN,
-            pressure: f64::NAN,
-            compressibility_z: f64::NAN,
-            missed_collisions: None,
-            missed_collision_fraction: f64::NAN,
-            mean_overlap: f64::NAN,
-            energy_relative_error: f64::NAN,
-            collapse_guard_fired: None,
-            collapse_time: f64::NAN,
-            tc: f64::NAN,
-            rms_step_over_radius: f64::NAN,
-            choice: String::new(),
-            temperature_curve: String::new(),
             oversubscribed: threads * ranks > env.usable_cpus as u64,
             hostname: env.hostname.clone(),
             cpu_model: env.cpu_model.clone(),
@@ -339,12 +141,79 @@ impl Record {
             git_dirty: env.git_dirty,
             mpi_library: env.mpi_library.clone(),
             load_average_start: env.load_average_start,
-            load_average: crate::environment::load_average(),
-            load_average_end: f64::NAN,
+            load_average: crate::study::environment::load_average(),
             study_started_utc: context.study_started_utc.to_owned(),
             finished_utc: utc_now(),
+            ..Record::unmeasured()
         }
     }
+}
+
+/// A column's value from the JSON summary's field of the same name: a count widened to
+/// u64, a missing number NaN, missing text "", a curve as JSON text.
+trait ToCell<T> {
+    fn to_cell(&self) -> T;
+}
+
+impl ToCell<u64> for usize {
+    fn to_cell(&self) -> u64 {
+        *self as u64
+    }
+}
+
+impl<T: Clone> ToCell<T> for T {
+    fn to_cell(&self) -> T {
+        self.clone()
+    }
+}
+
+impl ToCell<f64> for Option<f64> {
+    fn to_cell(&self) -> f64 {
+        self.unwrap_or(f64::NAN)
+    }
+}
+
+impl ToCell<String> for Option<String> {
+    fn to_cell(&self) -> String {
+        self.clone().unwrap_or_default()
+    }
+}
+
+impl ToCell<String> for Option<Vec<[f64; 2]>> {
+    fn to_cell(&self) -> String {
+        self.as_ref()
+            .and_then(|curve| serde_json::to_string(curve).ok())
+            .unwrap_or_default()
+    }
+}
+
+/// What a column holds where nothing was measured.
+trait Unmeasured {
+    const UNMEASURED: Self;
+}
+
+impl Unmeasured for String {
+    const UNMEASURED: String = String::new();
+}
+
+impl Unmeasured for u64 {
+    const UNMEASURED: u64 = 0;
+}
+
+impl Unmeasured for u32 {
+    const UNMEASURED: u32 = 0;
+}
+
+impl Unmeasured for f64 {
+    const UNMEASURED: f64 = f64::NAN;
+}
+
+impl Unmeasured for bool {
+    const UNMEASURED: bool = false;
+}
+
+impl Unmeasured for Option<u64> {
+    const UNMEASURED: Option<u64> = None;
 }
 
 impl Record {
@@ -421,36 +290,90 @@ fn civil_from_days(days: i64) -> (i64, u32, u32) {
     (year, month, day)
 }
 
-/// Applies the same code to every column: the one list of the schema.
+/// The one list of the schema: every column in Parquet order (after `schema_version`),
+/// grouped by type. [`Record`] is declared from it, and so are writing, reading and the
+/// blank row. A column marked `<- run` is the JSON summary's field of the same name
+/// ([`RunSummary`], where its meaning and unit are documented), copied by
+/// [`Record::measured`] through [`ToCell`]; docs/records.md documents every column.
 macro_rules! for_each_column {
     ($apply:ident) => {
-        $apply!(
+        $apply! {
             str: study, manifest_hash, build_id, config_key, scene, scaling, status, error, backend,
-                 boundary, broadphase, state_hash, hostname, cpu_model, os, rustc, profile,
-                 features, git_commit, mpi_library, study_started_utc, finished_utc, method,
-                 observe, choice, temperature_curve, cpu_affinity;
-            u64: threads, ranks, workers, n, steps, pair_collisions, wall_collisions,
-                 logical_cores, physical_cores, memory_bytes;
+                 boundary <- run, broadphase <- run, state_hash <- run, hostname, cpu_model, os,
+                 rustc, profile, features, git_commit, mpi_library, study_started_utc,
+                 finished_utc, method <- run, observe <- run, choice <- run,
+                 temperature_curve <- run, cpu_affinity;
+            u64: threads <- run, ranks <- run, workers <- run, n <- run, steps <- run,
+                 pair_collisions <- run, wall_collisions <- run, logical_cores, physical_cores,
+                 memory_bytes;
             u32: repetition;
-            f64: dt, packing, wall_s, cpu_s, setup_s, fps, particle_steps_per_s, integration_s,
-                 broad_phase_s, collision_s, communication_s, kinetic_energy_initial,
-                 kinetic_energy_final, momentum_initial_x, momentum_initial_y,
-                 momentum_final_x, momentum_final_y, max_overlap, max_wall_penetration,
-                 load_average_start,
-                 load_average, load_average_end, events_per_s, collision_rate, temperature,
-                 pressure, compressibility_z, missed_collision_fraction, mean_overlap,
-                 energy_relative_error, rms_step_over_radius, collapse_time, tc;
-            bool: oversubscribed, git_dirty;
-            opt_u64: seed, missed_collisions, collapse_guard_fired, usable_cpus
-        )
+            f64: dt <- run, packing <- run, wall_s <- run, cpu_s <- run, setup_s <- run,
+                 fps <- run, particle_steps_per_s <- run, integration_s <- run,
+                 broad_phase_s <- run, collision_s <- run, communication_s <- run,
+                 kinetic_energy_initial <- run, kinetic_energy_final <- run, momentum_initial_x,
+                 momentum_initial_y, momentum_final_x, momentum_final_y, max_overlap <- run,
+                 max_wall_penetration <- run, load_average_start, load_average,
+                 load_average_end, events_per_s <- run, collision_rate <- run,
+                 temperature <- run, pressure <- run, compressibility_z <- run,
+                 missed_collision_fraction <- run, mean_overlap <- run,
+                 energy_relative_error <- run, rms_step_over_radius <- run,
+                 collapse_time <- run, tc <- run;
+            bool: oversubscribed <- run, git_dirty;
+            opt_u64: seed <- run, missed_collisions <- run, collapse_guard_fired <- run,
+                 usable_cpus
+        }
     };
 }
+
+/// Declares [`Record`] from the column list, its blank row and its copy of a summary.
+macro_rules! declare_record {
+    ($($kind:ident: $($name:ident $(<- $from:ident)?),*);*) => {
+        /// One repetition of one configuration: the result of the run (its JSON summary),
+        /// the study's context and the environment. Failed runs keep their row, with NaN
+        /// measurements, zero counts, an empty `state_hash` and the reason in `error`.
+        /// Columns are documented in docs/records.md.
+        #[derive(Clone, Debug, PartialEq)]
+        pub struct Record {
+            $($(pub $name: column_type!($kind),)*)*
+        }
+
+        impl Record {
+            /// A row with nothing in it: every column's [`Unmeasured`] value.
+            fn unmeasured() -> Record {
+                Record {
+                    $($($name: Unmeasured::UNMEASURED,)*)*
+                }
+            }
+
+            /// Copies the columns that are the summary's fields.
+            fn copy_run(&mut self, summary: &RunSummary) {
+                $($($(
+                    let _ = stringify!($from); // only the columns marked `<- run`
+                    self.$name = summary.$name.to_cell();
+                )?)*)*
+            }
+        }
+    };
+}
+
+/// The Rust type of a column of each kind.
+macro_rules! column_type {
+    (str) => { String };
+    (u64) => { u64 };
+    (u32) => { u32 };
+    (f64) => { f64 };
+    (bool) => { bool };
+    (opt_u64) => { Option<u64> };
+}
+
+for_each_column!(declare_record);
 
 /// The records as a table, with `schema_version` first.
 pub fn to_frame(records: &[Record]) -> PolarsResult<DataFrame> {
     macro_rules! build {
-        (str: $($s:ident),*; u64: $($u:ident),*; u32: $($r:ident),*; f64: $($f:ident),*;
-         bool: $($b:ident),*; opt_u64: $($o:ident),*) => {{
+        (str: $($s:ident $(<- $s_:ident)?),*; u64: $($u:ident $(<- $u_:ident)?),*;
+         u32: $($r:ident $(<- $r_:ident)?),*; f64: $($f:ident $(<- $f_:ident)?),*;
+         bool: $($b:ident $(<- $b_:ident)?),*; opt_u64: $($o:ident $(<- $o_:ident)?),*) => {{
             let mut columns = vec![Column::new(
                 "schema_version".into(),
                 vec![SCHEMA_VERSION; records.len()],
@@ -500,8 +423,9 @@ pub fn from_frame(frame: &DataFrame) -> anyhow::Result<Vec<Record>> {
     };
     let rows = frame.height();
     macro_rules! read {
-        (str: $($s:ident),*; u64: $($u:ident),*; u32: $($r:ident),*; f64: $($f:ident),*;
-         bool: $($b:ident),*; opt_u64: $($o:ident),*) => {{
+        (str: $($s:ident $(<- $s_:ident)?),*; u64: $($u:ident $(<- $u_:ident)?),*;
+         u32: $($r:ident $(<- $r_:ident)?),*; f64: $($f:ident $(<- $f_:ident)?),*;
+         bool: $($b:ident $(<- $b_:ident)?),*; opt_u64: $($o:ident $(<- $o_:ident)?),*) => {{
             $(let $s = column(stringify!($s))?.str().with_context(|| mistyped(stringify!($s), "text"))?;)*
             $(let $u = column(stringify!($u))?.u64().with_context(|| mistyped(stringify!($u), "a count (u64)"))?;)*
             $(let $r = column(stringify!($r))?.u32().with_context(|| mistyped(stringify!($r), "a count (u32)"))?;)*
@@ -606,7 +530,7 @@ pub(crate) fn serial_context(environment: &Environment) -> RecordContext<'_> {
         config_key: "k",
         scene: "gas",
         scaling: "strong",
-        backend: "serial",
+        backend: BackendKind::Serial,
         workers: 1,
         repetition: 0,
         environment,

@@ -16,13 +16,15 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::cli::BackendName;
-use crate::environment::Environment;
-use crate::manifest::{Configuration, SceneInput, Study};
-use crate::output::{remove_leftovers, write_atomically};
-use crate::process::{Ended, interrupt_note, run_with_timeout, tail};
-use crate::records::{self, Record, RecordContext, STATUS_FAILED, STATUS_OK, STATUS_TIMED_OUT};
-use crate::summary::RunSummary;
+use crate::run::backend_kind::BackendKind;
+use crate::run::summary::RunSummary;
+use crate::study::environment::Environment;
+use crate::study::manifest::{Configuration, SceneInput, Study};
+use crate::study::records::{
+    self, Record, RecordContext, STATUS_FAILED, STATUS_OK, STATUS_TIMED_OUT,
+};
+use crate::system::output::{remove_leftovers, write_atomically};
+use crate::system::process::{Ended, interrupt_note, run_with_timeout, tail};
 
 /// How to run a study.
 #[derive(Clone, Debug)]
@@ -58,7 +60,7 @@ pub fn run_study(
     options: &RunOptions,
 ) -> anyhow::Result<StudyOutcome> {
     // Ctrl-C stops the running child too; every finished repetition is already on disk.
-    crate::process::stop_children_on_interrupt();
+    crate::system::process::stop_children_on_interrupt();
     let quiet = options.quiet || !std::io::stdout().is_terminal();
     let note = |text: &str| {
         if !quiet {
@@ -68,29 +70,9 @@ pub fn run_study(
     let configurations = runnable(study)?;
     let environment = Environment::capture();
     let dir = options.out.join(&study.name);
-    std::fs::create_dir_all(&dir).with_context(|| {
-        format!(
-            "cannot create the results folder {}; check the path or choose another with --out",
-            dir.display()
-        )
-    })?;
-    let _held = hold_folder(&dir)?;
-    // No other study writes here now: anything unfinished is a killed run's.
-    let removed = remove_leftovers(&dir)? + remove_leftovers(&dir.join("scenes"))?;
-    if removed > 0 {
-        note(&format!(
-            "note: removed {removed} unfinished file(s) a stopped study left in {}",
-            dir.display()
-        ));
-    }
+    let _held = open_results_folder(&dir, &note)?;
     let manifest_hash = manifest_hash(manifest_text);
-    let build_id = format!(
-        "{}{}-{}-[{}]",
-        environment.git_commit,
-        if environment.git_dirty { "-dirty" } else { "" },
-        environment.profile,
-        environment.features
-    );
+    let build_id = build_id(&environment);
     let (results, mut rows) = match options.resume {
         true => match resumable(&dir, &manifest_hash, &build_id)? {
             Some(found) => found,
@@ -122,24 +104,7 @@ pub fn run_study(
     rows.retain(|r| r.status == STATUS_OK);
     let kept_ok = rows.len();
 
-    for configuration in &configurations {
-        if configuration.backend != BackendName::Serial
-            && configuration.workers > environment.usable_cpus
-        {
-            note(&format!(
-                "note: {} is oversubscribed ({} workers on the {} CPUs this study may use); \
-                 its rows say so",
-                configuration.key(),
-                configuration.workers,
-                environment.usable_cpus
-            ));
-        }
-    }
-    for configuration in &configurations {
-        if let Some(placement) = crate::limits::placement_note(&configuration.footprint) {
-            note(&format!("{placement} ({}, every run)", configuration.key()));
-        }
-    }
+    note_configurations(&configurations, &environment, &note);
     let scene_files = materialize_scenes(&dir, &configurations)?;
     let todo: Vec<(u32, usize)> = (0..study.repetitions)
         .flat_map(|rep| (0..configurations.len()).map(move |c| (rep, c)))
@@ -147,17 +112,7 @@ pub fn run_study(
         .collect();
     let warm: BTreeSet<usize> = todo.iter().map(|&(_, c)| c).collect();
     let total = (warm.len() * study.warmups as usize + todo.len()) as u64;
-    let progress = if quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(total)
-    };
-    progress.set_style(
-        ProgressStyle::with_template(
-            "{bar:30} {pos}/{len} runs, {elapsed} gone, ~{eta} left  {msg}",
-        )
-        .expect("a valid progress template"),
-    );
+    let progress = progress_bar(quiet, total);
     note(&format!(
         "study {}: {} configurations × {} repetitions (+{} warm-up each) → {}",
         study.name,
@@ -167,31 +122,14 @@ pub fn run_study(
         results.display()
     ));
 
-    let exe = std::env::current_exe().context("cannot find this program's path")?;
+    let children = Children {
+        exe: std::env::current_exe().context("cannot find this program's path")?,
+        timeout: study.timeout,
+        simulate_args: &options.simulate_args,
+    };
+    let run = |configuration: &Configuration, scene: &Path| children.simulate(configuration, scene);
     let started_utc = records::utc_now();
-    let run = |configuration: &Configuration, scene: &Path| {
-        let mut command = Command::new(&exe);
-        command
-            .arg("simulate")
-            .arg(scene)
-            .args(configuration.simulate_args())
-            .args(&options.simulate_args);
-        run_with_timeout(command, study.timeout)
-    };
     let mut calibrations = Vec::new();
-    let mut calibrate = || -> anyhow::Result<()> {
-        let mut command = Command::new(&exe);
-        command.arg("calibrate");
-        match run_with_timeout(command, study.timeout)? {
-            Ended::Exited { status, stdout, .. } if status.success() => {
-                let calibration = serde_json::from_str(stdout.trim())
-                    .context("`collide calibrate` printed no calibration time")?;
-                calibrations.push(calibration);
-                Ok(())
-            }
-            _ => bail!("the calibration workload (`collide calibrate`) failed"),
-        }
-    };
     for &c in &warm {
         for _ in 0..study.warmups {
             progress.set_message(format!("warm-up {}", configurations[c].key()));
@@ -204,7 +142,7 @@ pub fn run_study(
     for (index, &(rep, c)) in todo.iter().enumerate() {
         if options.calibrate && (index == 0 || todo[index - 1].0 != rep) {
             progress.set_message(format!("rep {rep}: calibration"));
-            calibrate()?;
+            calibrations.push(children.calibrate()?);
         }
         let configuration = configurations[c];
         let key = configuration.key();
@@ -216,7 +154,7 @@ pub fn run_study(
             config_key: &key,
             scene: &configuration.scene,
             scaling: study.scaling.name(),
-            backend: configuration.backend_name(),
+            backend: configuration.backend,
             workers: configuration.workers as u64,
             repetition: rep,
             environment: &environment,
@@ -238,12 +176,7 @@ pub fn run_study(
     }
     progress.finish_and_clear();
     if !todo.is_empty() {
-        let end = crate::environment::load_average();
-        for row in rows.iter_mut().skip(kept_ok) {
-            row.load_average_end = end;
-        }
-        let _writing = interrupt_note();
-        records::write(&results, &rows)?;
+        record_load_at_end(&results, &mut rows, kept_ok)?;
     }
     Ok(StudyOutcome {
         results,
@@ -252,6 +185,131 @@ pub fn run_study(
         kept,
         calibrations,
     })
+}
+
+/// This program's `simulate` and `calibrate`, run as child processes under the study's
+/// timeout.
+struct Children<'a> {
+    exe: PathBuf,
+    timeout: Duration,
+    /// Extra `collide simulate` arguments of every run.
+    simulate_args: &'a [String],
+}
+
+impl Children<'_> {
+    /// One run of `configuration` on the scene file `scene`.
+    fn simulate(&self, configuration: &Configuration, scene: &Path) -> std::io::Result<Ended> {
+        let mut command = Command::new(&self.exe);
+        command
+            .arg("simulate")
+            .arg(scene)
+            .args(configuration.simulate_args())
+            .args(self.simulate_args);
+        run_with_timeout(command, self.timeout)
+    }
+
+    /// One measurement of the calibration workload.
+    fn calibrate(&self) -> anyhow::Result<Calibration> {
+        let mut command = Command::new(&self.exe);
+        command.arg("calibrate");
+        match run_with_timeout(command, self.timeout)? {
+            Ended::Exited { status, stdout, .. } if status.success() => {
+                serde_json::from_str(stdout.trim())
+                    .context("`collide calibrate` printed no calibration time")
+            }
+            _ => bail!("the calibration workload (`collide calibrate`) failed"),
+        }
+    }
+}
+
+/// Creates the study's results folder and holds it for this study alone (the open,
+/// locked folder returned: released when dropped); removes what a killed study left
+/// unfinished there.
+fn open_results_folder(dir: &Path, note: &dyn Fn(&str)) -> anyhow::Result<File> {
+    std::fs::create_dir_all(dir).with_context(|| {
+        format!(
+            "cannot create the results folder {}; check the path or choose another with --out",
+            dir.display()
+        )
+    })?;
+    let held = hold_folder(dir)?;
+    // No other study writes here now: anything unfinished is a killed run's.
+    let removed = remove_leftovers(dir)? + remove_leftovers(&dir.join("scenes"))?;
+    if removed > 0 {
+        note(&format!(
+            "note: removed {removed} unfinished file(s) a stopped study left in {}",
+            dir.display()
+        ));
+    }
+    Ok(held)
+}
+
+/// Commit, dirty flag, profile and features: `--resume` only continues the same build.
+fn build_id(environment: &Environment) -> String {
+    format!(
+        "{}{}-{}-[{}]",
+        environment.git_commit,
+        if environment.git_dirty { "-dirty" } else { "" },
+        environment.profile,
+        environment.features
+    )
+}
+
+/// Says which configurations are oversubscribed and which place their disks slowly.
+fn note_configurations(
+    configurations: &[&Configuration],
+    environment: &Environment,
+    note: &dyn Fn(&str),
+) {
+    for configuration in configurations {
+        if configuration.backend != BackendKind::Serial
+            && configuration.workers > environment.usable_cpus
+        {
+            note(&format!(
+                "note: {} is oversubscribed ({} workers on the {} CPUs this study may use); \
+                 its rows say so",
+                configuration.key(),
+                configuration.workers,
+                environment.usable_cpus
+            ));
+        }
+    }
+    for configuration in configurations {
+        if let Some(placement) = crate::run::limits::placement_note(&configuration.footprint) {
+            note(&format!("{placement} ({}, every run)", configuration.key()));
+        }
+    }
+}
+
+/// The study's progress bar over `total` runs (hidden when quiet).
+fn progress_bar(quiet: bool, total: u64) -> ProgressBar {
+    let progress = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(total)
+    };
+    progress.set_style(
+        ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} runs, {elapsed} gone, ~{eta} left  {msg}",
+        )
+        .expect("a valid progress template"),
+    );
+    progress
+}
+
+/// Records the load average at the study's end in the rows measured now (from
+/// `measured_from` on) and writes every row.
+fn record_load_at_end(
+    results: &Path,
+    rows: &mut [Record],
+    measured_from: usize,
+) -> anyhow::Result<()> {
+    let end = crate::study::environment::load_average();
+    for row in rows.iter_mut().skip(measured_from) {
+        row.load_average_end = end;
+    }
+    let _writing = interrupt_note();
+    records::write(results, rows)
 }
 
 /// The row of one run from how its process ended: measured if it exited 0 with a
@@ -296,8 +354,8 @@ fn record_of(
     }
 }
 
-/// What `collide calibrate` prints: one JSON object, the times of
-/// [`crate::calibrate::workload_seconds`].
+/// What `collide calibrate` prints: one JSON object, the wall and CPU seconds of the
+/// calibration workload of `collide check`.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
 pub struct Calibration {
     /// Wall seconds.
@@ -319,7 +377,7 @@ fn runnable(study: &Study) -> anyhow::Result<Vec<&Configuration>> {
         return Ok(configurations);
     }
     let before = configurations.len();
-    configurations.retain(|c| c.backend != BackendName::Mpi);
+    configurations.retain(|c| c.backend != BackendKind::Mpi);
     let skipped = before - configurations.len();
     if configurations.is_empty() {
         bail!(
@@ -368,7 +426,7 @@ fn hold_folder(dir: &Path) -> anyhow::Result<File> {
         Err(TryLockError::Error(err)) => eprintln!(
             "warning: cannot lock the results folder {} ({}); do not run two studies into it at once",
             dir.display(),
-            crate::output::io_reason(&err)
+            crate::system::output::io_reason(&err)
         ),
     }
     Ok(folder)

@@ -4,15 +4,16 @@
 
 use std::fmt::Write as _;
 
-use crate::accuracy::{
+use crate::report::accuracy::{
     AccuracyPoint, Breakdown, CoolingCurve, FAILURE_MISSED_FRACTION, FLAG_WALL_PENETRATION,
     HAFF_BREAKDOWN, PackingGroup, method_label,
 };
-use crate::accuracy_figures::COOLING_FILE;
-use crate::analysis::{Baseline, Setup};
-use crate::figures::Figure;
-use crate::manifest::Scaling;
-use crate::records::{Record, STATUS_OK};
+use crate::report::analysis::{Baseline, Setup};
+use crate::report::figures::cooling::COOLING_FILE;
+use crate::report::figures::scaling::Figure;
+use crate::run::backend_kind::BackendKind;
+use crate::study::manifest::Scaling;
+use crate::study::records::{Record, STATUS_OK};
 
 /// The seed report's Cuadro 1: 1000 disks, 400 cycles.
 const SEED_N: u64 = 1000;
@@ -35,7 +36,7 @@ pub struct Pictures {
     pub accuracy: Option<AccuracySection>,
 }
 
-/// What the accuracy section shows ([`crate::accuracy::analyse`], `accuracy_figures`).
+/// What the accuracy section shows ([`crate::report::accuracy::analyse`], `figures`).
 #[derive(Clone, Debug, Default)]
 pub struct AccuracySection {
     pub groups: Vec<PackingGroup>,
@@ -46,7 +47,7 @@ pub struct AccuracySection {
     pub cooling: Vec<CoolingCurve>,
 }
 
-/// The report of one study's records, analysed into `setups` ([`crate::analysis::analyse`]);
+/// The report of one study's records, analysed into `setups` ([`crate::report::analysis::analyse`]);
 /// `source` names where they were read from.
 pub fn markdown(records: &[Record], setups: &[Setup], source: &str, pictures: &Pictures) -> String {
     let mut out = String::new();
@@ -431,12 +432,12 @@ fn findings(out: &mut String, setups: &[Setup]) {
             let serial = setup
                 .backends
                 .iter()
-                .find(|b| b.backend == "serial")
+                .find(|b| b.backend == BackendKind::Serial.name())
                 .and_then(|b| b.points.first());
             let mpi_12 = setup
                 .backends
                 .iter()
-                .find(|b| b.backend == "mpi")
+                .find(|b| b.backend == BackendKind::Mpi.name())
                 .and_then(|b| b.points.iter().find(|p| p.workers == 12));
             if let Some(serial) = serial {
                 let _ = writeln!(

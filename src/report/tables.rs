@@ -9,10 +9,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 
-use crate::analysis::{self, Setup};
-use crate::manifest::Scaling;
-use crate::records::{self, Record, STATUS_OK};
-use crate::report::describe;
+use crate::report::analysis::{self, Setup};
+use crate::report::markdown::describe;
+use crate::stats::median;
+use crate::study::manifest::Scaling;
+use crate::study::records::{self, Record, STATUS_OK};
 
 /// Every record under `path`: a results file, or a study folder of them. In a folder, a
 /// file that cannot be read, or holds no runs, is skipped with a warning that names it
@@ -242,17 +243,6 @@ pub fn one_study<'a>(records: &'a [Record], path: &Path) -> anyhow::Result<&'a s
             names.len(),
             names.join(", ")
         ),
-    }
-}
-
-/// Median of a non-empty slice.
-pub fn median(values: &mut [f64]) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let mid = values.len() / 2;
-    if values.len() % 2 == 1 {
-        values[mid]
-    } else {
-        0.5 * (values[mid - 1] + values[mid])
     }
 }
 

@@ -1,15 +1,14 @@
 //! Validated run specifications: what to simulate and how, independent of any file format.
 //!
-//! `scene_file` turns TOML into a [`RunSpec`]; [`RunSpec::prepare`] builds the initial
-//! state and resolves `dt = "auto"`. Nothing here reads files or prints.
+//! `scene_file` turns TOML into a [`RunSpec`]; [`RunSpec::prepare`] (in `prepare.rs`)
+//! builds the initial state and resolves `dt = "auto"`. Nothing here reads files or
+//! prints.
 
 use serde::Deserialize;
 
-pub use crate::auto::DEFAULT_MISSED_TOLERANCE;
-use crate::auto::choose;
 pub use crate::sim::engine::Method;
 use crate::sim::event::EventParams;
-use crate::sim::scene::{Extent, GasSpec, Placement, PlacementError, RSA_JAMMING_PACKING};
+use crate::sim::scene::{Extent, GasSpec, Placement, RSA_JAMMING_PACKING};
 use crate::sim::step::StepParams;
 use crate::sim::{Broadphase, Particles, Scene};
 
@@ -31,7 +30,7 @@ pub enum DtChoice {
         fraction: f64,
     },
     /// The largest dt whose pilot misses at most `missed_tolerance` of its collisions
-    /// (`dt = "auto"` without `dt_fraction`; see `crate::auto`).
+    /// (`dt = "auto"` without `dt_fraction`; see `crate::run::auto`).
     Tolerance,
 }
 
@@ -40,7 +39,7 @@ pub enum DtChoice {
 #[serde(try_from = "String")]
 pub enum MethodChoice {
     Fixed(Method),
-    /// `method = "auto"`: chosen by `crate::auto::choose`.
+    /// `method = "auto"`: chosen by `crate::run::auto::choose`.
     Auto,
 }
 
@@ -81,6 +80,9 @@ impl TryFrom<String> for MethodChoice {
 
 /// Default of `dt_fraction`: the fastest disk moves at most a tenth of the smallest radius per step.
 pub const DEFAULT_DT_FRACTION: f64 = 0.1;
+
+/// Default of `missed_tolerance`: 10⁻³ (also the accuracy study's failure line).
+pub const DEFAULT_MISSED_TOLERANCE: f64 = 1e-3;
 
 /// Default TC model time of the event method, in units of r_min / v_rms (the time the
 /// rms disk takes to cross its radius): far below a mean free time at any packing.
@@ -279,40 +281,5 @@ impl RunSpec {
             bytes,
             placement_s,
         }
-    }
-
-    /// Builds the initial disks (placing a random gas) and resolves the method and time
-    /// step (running the pilots of `crate::auto` when either is "auto").
-    pub fn prepare(&self) -> Result<PreparedRun, PlacementError> {
-        let (scene, seed) = match &self.scene {
-            SceneSource::Gas(gas) => (gas.build()?, Some(gas.seed)),
-            SceneSource::Explicit(scene) => (scene.clone(), None),
-        };
-        let tc = self.method.tc.unwrap_or_else(|| {
-            let rms = scene.particles.rms_speed();
-            let speed = if rms > 0.0 { rms } else { 1.0 };
-            DEFAULT_TC_FRACTION * scene.particles.min_radius() / speed
-        });
-        let event = EventParams { tc };
-        let choice = choose(&self.scene, &scene, &self.method, event)?;
-        Ok(PreparedRun {
-            initial: InitialFigures {
-                packing: scene.packing(),
-                rms_speed: scene.particles.rms_speed(),
-                min_radius: scene.particles.min_radius(),
-            },
-            scene,
-            params: StepParams {
-                dt: choice.dt,
-                broadphase: self.method.broadphase,
-            },
-            steps: self.method.steps,
-            dt_auto_fraction: choice.dt_auto_fraction,
-            choice: choice.reason,
-            seed,
-            method: choice.method,
-            event,
-            observe: self.method.observe,
-        })
     }
 }

@@ -9,43 +9,18 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::scene_limits::{self, Field};
+use crate::run::overrides::{DtValue, Overrides};
+use crate::run::scene_limits::{self, Field};
+use crate::run::spec::{
+    DEFAULT_DT_FRACTION, DEFAULT_MISSED_TOLERANCE, DtChoice, InjectedSlowdown, Method,
+    MethodChoice, MethodSpec, Observe, RunSpec, SceneSource,
+};
 use crate::sim::grid::StripGrid;
 use crate::sim::scene::{
     Extent, GasSpec, MassRule, Placement, RSA_JAMMING_PACKING, RadiusDistribution,
     check_periodic_box,
 };
 use crate::sim::{Boundary, Broadphase, Disk, Domain, Particles, Physics, Scene};
-use crate::spec::{
-    DEFAULT_DT_FRACTION, DEFAULT_MISSED_TOLERANCE, DtChoice, InjectedSlowdown, Method,
-    MethodChoice, MethodSpec, Observe, RunSpec, SceneSource,
-};
-
-/// Values given on the command line that replace the scene file's.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Overrides {
-    pub n: Option<i64>,
-    pub steps: Option<i64>,
-    pub seed: Option<u64>,
-    pub dt: Option<DtValue>,
-    pub packing: Option<f64>,
-    pub broadphase: Option<Broadphase>,
-    pub method: Option<MethodChoice>,
-    pub observe: Option<Observe>,
-    /// TC model time of the event method (0: guard off).
-    pub tc: Option<f64>,
-}
-
-/// A time step as written: a number or the word "auto".
-#[derive(Clone, Debug, PartialEq, Deserialize)]
-#[serde(
-    untagged,
-    expecting = "expected a time step: a number such as 0.01, or \"auto\""
-)]
-pub enum DtValue {
-    Seconds(f64),
-    Word(String),
-}
 
 #[derive(Debug, thiserror::Error)]
 pub enum SceneFileError {
@@ -173,6 +148,15 @@ struct RawMethod {
     missed_tolerance: Option<Spanned<f64>>,
     tc: Option<Spanned<f64>>,
     observe: Option<Spanned<Observe>>,
+}
+
+/// What an explicit scene's disks take where they give no radius or mass.
+struct DiskDefaults {
+    radius: f64,
+    /// Where the default radius came from.
+    radius_origin: Origin,
+    /// `None`: mass ∝ area.
+    mass: Option<f64>,
 }
 
 /// Where a value came from, for error messages.
@@ -635,6 +619,73 @@ impl Validator<'_> {
         raw: &RawScene,
         overrides: &Overrides,
     ) -> Result<SceneSource, SceneFileError> {
+        self.refuse_random_keys(raw, overrides)?;
+        let Some((width, height)) = self.size(raw)? else {
+            return Err(self.invalid(
+                Origin::Default,
+                "scene.size",
+                "is missing".to_owned(),
+                "a scene with explicit disks needs its box, e.g. size = [100.0, 100.0]",
+            ));
+        };
+        let domain = Domain {
+            width,
+            height,
+            boundary: self
+                .in_file(&raw.boundary)
+                .map_or(Boundary::Walls, |s| s.value),
+        };
+        let (default_radius, radius_origin) = match self.radius(raw)? {
+            (RadiusDistribution::Fixed(r), origin) => (r, origin),
+            (RadiusDistribution::Uniform { .. }, origin) => {
+                return Err(self.invalid(
+                    origin,
+                    "scene.radius",
+                    "is a range, which only random scenes draw from".to_owned(),
+                    "give one radius as the default, or a radius per [[scene.particle]]",
+                ));
+            }
+        };
+        let default_mass = match self.mass(raw)? {
+            MassRule::Fixed(m) => Some(m),
+            MassRule::Area => None,
+        };
+        let defaults = DiskDefaults {
+            radius: default_radius,
+            radius_origin,
+            mass: default_mass,
+        };
+        let entries = raw.particle.as_deref().unwrap_or_default();
+        let mut disks = Vec::with_capacity(entries.len());
+        let mut origins = Vec::with_capacity(entries.len());
+        for (index, entry) in entries.iter().enumerate() {
+            let origin = self.origin(entry.span());
+            disks.push(self.explicit_disk(entry.get_ref(), index, origin, &defaults, &domain)?);
+            origins.push(origin);
+        }
+        if disks.is_empty() {
+            return Err(self.invalid(
+                Origin::Default,
+                "scene.particle",
+                "is empty".to_owned(),
+                "list at least one [[scene.particle]]",
+            ));
+        }
+        let particles = Particles::from_disks(&disks);
+        self.refuse_overlaps(raw, &domain, &particles, &origins)?;
+        Ok(SceneSource::Explicit(Scene {
+            domain,
+            physics: self.physics(raw)?,
+            particles,
+        }))
+    }
+
+    /// Refuses the keys and flags that only random scenes take.
+    fn refuse_random_keys(
+        &self,
+        raw: &RawScene,
+        overrides: &Overrides,
+    ) -> Result<(), SceneFileError> {
         let file_origin = |span: Option<Range<usize>>| span.map(|span| self.origin(span));
         let random_only = [
             ("scene.n", file_origin(raw.n.as_ref().map(Spanned::span))),
@@ -671,121 +722,100 @@ impl Validator<'_> {
                 ));
             }
         }
-        let Some((width, height)) = self.size(raw)? else {
+        Ok(())
+    }
+
+    /// Disk `index` of an explicit scene, with the scene's default radius and mass where
+    /// it gives none, checked to be finite and inside `domain`.
+    fn explicit_disk(
+        &self,
+        p: &RawParticle,
+        index: usize,
+        origin: Origin,
+        defaults: &DiskDefaults,
+        domain: &Domain,
+    ) -> Result<Disk, SceneFileError> {
+        let field = format!("scene.particle[{index}]");
+        let radius = match p.radius {
+            Some(r) => self.positive(r, origin, &format!("{field}.radius"), "give a radius > 0")?,
+            None => self.positive(
+                defaults.radius,
+                defaults.radius_origin,
+                "scene.radius",
+                "give a radius > 0",
+            )?,
+        };
+        let mass = match p.mass.or(defaults.mass) {
+            Some(m) => self.positive(m, origin, &format!("{field}.mass"), "give a mass > 0")?,
+            None => std::f64::consts::PI * radius * radius,
+        };
+        if ![p.x, p.y, p.vx, p.vy].iter().all(|v| v.is_finite()) {
             return Err(self.invalid(
-                Origin::Default,
-                "scene.size",
-                "is missing".to_owned(),
-                "a scene with explicit disks needs its box, e.g. size = [100.0, 100.0]",
-            ));
-        };
-        let domain = Domain {
-            width,
-            height,
-            boundary: self
-                .in_file(&raw.boundary)
-                .map_or(Boundary::Walls, |s| s.value),
-        };
-        let (default_radius, radius_origin) = match self.radius(raw)? {
-            (RadiusDistribution::Fixed(r), origin) => (r, origin),
-            (RadiusDistribution::Uniform { .. }, origin) => {
-                return Err(self.invalid(
-                    origin,
-                    "scene.radius",
-                    "is a range, which only random scenes draw from".to_owned(),
-                    "give one radius as the default, or a radius per [[scene.particle]]",
-                ));
-            }
-        };
-        let default_mass = match self.mass(raw)? {
-            MassRule::Fixed(m) => Some(m),
-            MassRule::Area => None,
-        };
-        let entries = raw.particle.as_deref().unwrap_or_default();
-        let mut disks = Vec::with_capacity(entries.len());
-        let mut origins = Vec::with_capacity(entries.len());
-        for (index, entry) in entries.iter().enumerate() {
-            let origin = self.origin(entry.span());
-            let field = format!("scene.particle[{index}]");
-            let p = entry.get_ref();
-            let radius = match p.radius {
-                Some(r) => {
-                    self.positive(r, origin, &format!("{field}.radius"), "give a radius > 0")?
-                }
-                None => self.positive(
-                    default_radius,
-                    radius_origin,
-                    "scene.radius",
-                    "give a radius > 0",
-                )?,
-            };
-            let mass = match p.mass.or(default_mass) {
-                Some(m) => self.positive(m, origin, &format!("{field}.mass"), "give a mass > 0")?,
-                None => std::f64::consts::PI * radius * radius,
-            };
-            if ![p.x, p.y, p.vx, p.vy].iter().all(|v| v.is_finite()) {
-                return Err(self.invalid(
-                    origin,
-                    &field,
-                    "has a position or velocity that is not a finite number".to_owned(),
-                    "give finite x, y, vx, vy",
-                ));
-            }
-            let inside = match domain.boundary {
-                Boundary::Walls => {
-                    p.x - radius >= 0.0
-                        && p.x + radius <= width
-                        && p.y - radius >= 0.0
-                        && p.y + radius <= height
-                }
-                Boundary::Periodic => (0.0..width).contains(&p.x) && (0.0..height).contains(&p.y),
-            };
-            if !inside {
-                return Err(self.invalid(
-                    origin,
-                    &field,
-                    format!(
-                        "at ({}, {}) with radius {radius} does not lie inside the {width}×{height} box",
-                        p.x, p.y
-                    ),
-                    "move it inside [0, w] × [0, h] (the whole disk, with walls) or enlarge scene.size",
-                ));
-            }
-            disks.push(Disk {
-                x: p.x,
-                y: p.y,
-                vx: p.vx,
-                vy: p.vy,
-                radius,
-                mass,
-            });
-            origins.push(origin);
-        }
-        if disks.is_empty() {
-            return Err(self.invalid(
-                Origin::Default,
-                "scene.particle",
-                "is empty".to_owned(),
-                "list at least one [[scene.particle]]",
+                origin,
+                &field,
+                "has a position or velocity that is not a finite number".to_owned(),
+                "give finite x, y, vx, vy",
             ));
         }
-        let particles = Particles::from_disks(&disks);
-        if check_periodic_box(&domain, particles.max_radius()).is_err() {
+        let inside = match domain.boundary {
+            Boundary::Walls => {
+                p.x - radius >= 0.0
+                    && p.x + radius <= domain.width
+                    && p.y - radius >= 0.0
+                    && p.y + radius <= domain.height
+            }
+            Boundary::Periodic => {
+                (0.0..domain.width).contains(&p.x) && (0.0..domain.height).contains(&p.y)
+            }
+        };
+        if !inside {
+            return Err(self.invalid(
+                origin,
+                &field,
+                format!(
+                    "at ({}, {}) with radius {radius} does not lie inside the {}×{} box",
+                    p.x, p.y, domain.width, domain.height
+                ),
+                "move it inside [0, w] × [0, h] (the whole disk, with walls) or enlarge scene.size",
+            ));
+        }
+        Ok(Disk {
+            x: p.x,
+            y: p.y,
+            vx: p.vx,
+            vy: p.vy,
+            radius,
+            mass,
+        })
+    }
+
+    /// Refuses a periodic box too narrow for the disks, and disks that overlap (naming
+    /// the later of the first overlapping pair).
+    fn refuse_overlaps(
+        &self,
+        raw: &RawScene,
+        domain: &Domain,
+        particles: &Particles,
+        origins: &[Origin],
+    ) -> Result<(), SceneFileError> {
+        if check_periodic_box(domain, particles.max_radius()).is_err() {
             return Err(self.invalid(
                 self.in_file(&raw.size)
                     .map_or(Origin::Default, |s| s.origin),
                 "scene.size",
                 format!(
-                    "is {width}×{height}, narrower than 3 contact diameters ({}) of a periodic box",
+                    "is {}×{}, narrower than 3 contact diameters ({}) of a periodic box",
+                    domain.width,
+                    domain.height,
                     6.0 * particles.max_radius()
                 ),
                 "enlarge the box, or use boundary = \"walls\"",
             ));
         }
-        let mut grid = StripGrid::new(&domain, &particles);
-        grid.build(&particles);
+        let mut grid = StripGrid::new(domain, particles);
+        grid.build(particles);
         let mut contacts = Vec::new();
-        grid.find_contacts(&particles, &domain, &mut contacts);
+        grid.find_contacts(particles, domain, &mut contacts);
         if let Some(first) = contacts.iter().min_by_key(|contact| contact.key) {
             let (a, b) = (first.a as usize, first.b as usize);
             return Err(self.invalid(
@@ -795,11 +825,7 @@ impl Validator<'_> {
                 "move the disks apart: centres must be at least r_a + r_b apart",
             ));
         }
-        Ok(SceneSource::Explicit(Scene {
-            domain,
-            physics: self.physics(raw)?,
-            particles,
-        }))
+        Ok(())
     }
 }
 

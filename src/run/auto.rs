@@ -6,15 +6,14 @@
 
 use std::borrow::Cow;
 
+use crate::run::spec::{
+    DEFAULT_DT_FRACTION, DtChoice, Method, MethodChoice, MethodSpec, SceneSource,
+};
 use crate::sim::Scene;
 use crate::sim::event::EventParams;
 use crate::sim::pilot::{StepPilot, event_pilot, step_pilot};
 use crate::sim::scene::{Extent, PlacementError};
 use crate::sim::step::auto_dt;
-use crate::spec::{DEFAULT_DT_FRACTION, DtChoice, Method, MethodChoice, MethodSpec, SceneSource};
-
-/// Default of `missed_tolerance`: 10⁻³ (also the accuracy study's failure line).
-pub const DEFAULT_MISSED_TOLERANCE: f64 = 1e-3;
 
 /// The dt fractions tried, largest first: v_max·dt = f·r_min for f = 4, 2, 1, ½, … 1/128.
 const LADDER_TOP: f64 = 4.0;
@@ -125,13 +124,50 @@ pub fn choose(
     spec: &MethodSpec,
     event: EventParams,
 ) -> Result<Choice, PlacementError> {
-    let fraction_dt = |fraction: f64| Choice {
+    if let Some(choice) = without_pilots(scene, spec) {
+        return Ok(choice);
+    }
+    let pilot_scene = pilot_scene(source, scene)?;
+    let pilot_scene = pilot_scene.as_ref();
+    let time = auto_dt(
+        &pilot_scene.particles,
+        &pilot_scene.domain,
+        &pilot_scene.physics,
+        PILOT_RADII,
+    );
+    let (step, pilot, dt_note) = step_choice(scene, pilot_scene, spec, time);
+    let pilots = Pilots {
+        notes: format!(
+            "{dt_note}{}",
+            describe_step_pilot(pilot_scene, &pilot, spec.missed_tolerance)
+        ),
+        step_passes: pilot.missed_fraction() <= spec.missed_tolerance,
+        scene: pilot_scene,
+        time,
+    };
+    if spec.method == MethodChoice::Fixed(Method::Step) {
+        return Ok(Choice {
+            reason: Some(pilots.notes),
+            ..step
+        });
+    }
+    Ok(method_auto(scene, spec, event, step, &pilots))
+}
+
+/// The step method at `fraction` (v_max·dt = fraction·r_min) of `scene`.
+fn fraction_dt(scene: &Scene, fraction: f64) -> Choice {
+    Choice {
         method: Method::Step,
         dt: auto_dt(&scene.particles, &scene.domain, &scene.physics, fraction),
         dt_auto_fraction: Some(fraction),
         reason: None,
-    };
-    let plain = match (spec.method, spec.dt) {
+    }
+}
+
+/// The choices that need no pilot: a fixed method with a fixed dt or a dt rule, and the
+/// event method under a tolerance (it misses nothing).
+fn without_pilots(scene: &Scene, spec: &MethodSpec) -> Option<Choice> {
+    match (spec.method, spec.dt) {
         (MethodChoice::Fixed(method), DtChoice::Fixed(dt)) => Some(Choice {
             method,
             dt,
@@ -140,7 +176,7 @@ pub fn choose(
         }),
         (MethodChoice::Fixed(method), DtChoice::Auto { fraction }) => Some(Choice {
             method,
-            ..fraction_dt(fraction)
+            ..fraction_dt(scene, fraction)
         }),
         (MethodChoice::Fixed(Method::Event), DtChoice::Tolerance) => Some(Choice {
             method: Method::Event,
@@ -148,24 +184,21 @@ pub fn choose(
                 "dt auto: the event method misses no collisions, so dt is the dt_fraction rule \
                  (v_max·dt = {DEFAULT_DT_FRACTION}·r_min)"
             )),
-            ..fraction_dt(DEFAULT_DT_FRACTION)
+            ..fraction_dt(scene, DEFAULT_DT_FRACTION)
         }),
         _ => None,
-    };
-    if let Some(choice) = plain {
-        return Ok(choice);
     }
-    let pilot_scene = pilot_scene(source, scene)?;
-    let pilot_scene = pilot_scene.as_ref();
-    let tolerance = spec.missed_tolerance;
-    let pilot_time = auto_dt(
-        &pilot_scene.particles,
-        &pilot_scene.domain,
-        &pilot_scene.physics,
-        PILOT_RADII,
-    );
-    // The step method's dt, and its pilot at that dt.
-    let (step, pilot, dt_note) = match spec.dt {
+}
+
+/// The step method's dt, its pilot at that dt (on `pilot_scene`, over the simulated
+/// `pilot_time`), and a note on how dt was chosen.
+fn step_choice(
+    scene: &Scene,
+    pilot_scene: &Scene,
+    spec: &MethodSpec,
+    pilot_time: f64,
+) -> (Choice, StepPilot, String) {
+    match spec.dt {
         DtChoice::Fixed(dt) => {
             let steps = ((pilot_time / dt).ceil() as u64).clamp(1, MAX_PILOT_STEPS);
             let pilot = step_pilot(pilot_scene, dt, steps, spec.broadphase);
@@ -178,7 +211,7 @@ pub fn choose(
             (choice, pilot, String::new())
         }
         DtChoice::Auto { fraction } => {
-            let choice = fraction_dt(fraction);
+            let choice = fraction_dt(scene, fraction);
             let dt = auto_dt(
                 &pilot_scene.particles,
                 &pilot_scene.domain,
@@ -191,16 +224,20 @@ pub fn choose(
         }
         DtChoice::Tolerance => {
             let (fraction, pilot) = largest_passing_fraction(pilot_scene, spec);
-            let verdict = if pilot.missed_fraction() <= tolerance {
+            let verdict = if pilot.missed_fraction() <= spec.missed_tolerance {
                 "the largest of 4·2^-k (k < 10) within"
             } else {
                 "the smallest tried, still above"
             };
             let note = format!("dt auto: v_max·dt = {fraction}·r_min, {verdict} the tolerance; ",);
-            (fraction_dt(fraction), pilot, note)
+            (fraction_dt(scene, fraction), pilot, note)
         }
-    };
-    let pilot_note = format!(
+    }
+}
+
+/// What the step method's pilot found, against the tolerance.
+fn describe_step_pilot(pilot_scene: &Scene, pilot: &StepPilot, tolerance: f64) -> String {
+    format!(
         "pilot ({} disks, {} steps of {:.4e}): {} of {} met pairs missed = {:.2e} against \
          missed_tolerance {tolerance:e}",
         pilot_scene.particles.len(),
@@ -209,48 +246,65 @@ pub fn choose(
         pilot.missed_collisions,
         pilot.missed_collisions + pilot.pair_collisions,
         pilot.missed_fraction(),
-    );
-    let step_passes = pilot.missed_fraction() <= tolerance;
-    if spec.method == MethodChoice::Fixed(Method::Step) {
-        return Ok(Choice {
-            reason: Some(format!("{dt_note}{pilot_note}")),
-            ..step
-        });
-    }
-    // method = "auto" from here.
+    )
+}
+
+/// The pilots of `method = "auto"` so far: the scene they ran on, the simulated time
+/// they cover, whether the step method's stayed within the tolerance, and the notes on dt
+/// and that pilot.
+struct Pilots<'a> {
+    scene: &'a Scene,
+    time: f64,
+    step_passes: bool,
+    notes: String,
+}
+
+/// `method = "auto"`: the step method with gravity or when the event pilot collapses,
+/// else the cheaper method under the cost model (the event method when the step method
+/// misses more than the tolerance).
+fn method_auto(
+    scene: &Scene,
+    spec: &MethodSpec,
+    event: EventParams,
+    step: Choice,
+    pilots: &Pilots<'_>,
+) -> Choice {
+    let notes = &pilots.notes;
+    let step_passes = pilots.step_passes;
     if scene.physics.gravity.is_some() {
-        return Ok(Choice {
+        return Choice {
             reason: Some(format!(
                 "method auto: step, the only method with gravity (the event method flies \
-                 straight lines); {dt_note}{pilot_note}"
+                 straight lines); {notes}"
             )),
             ..step
-        });
+        };
     }
     let n = scene.particles.len() as f64;
     let rates = cost_rates(n, scene.packing());
     let step_cost = n * spec.steps as f64 / rates.step_particle_steps_per_s;
     // Both methods run the same simulated time, steps × dt.
     let sim_time = spec.steps as f64 * step.dt;
-    let event_run = event_pilot(pilot_scene, event, pilot_time);
+    let pilot_time = pilots.time;
+    let event_run = event_pilot(pilots.scene, event, pilot_time);
     if let Some(collapse_time) = event_run.collapse_time {
         let caveat = if step_passes {
             ""
         } else {
             ", though it misses more than the tolerance"
         };
-        return Ok(Choice {
+        return Choice {
             reason: Some(format!(
                 "method auto: step{caveat}: the event method collapsed in its pilot at \
                  t = {collapse_time:.4e} (tc = {:e}; a larger tc guards against it); \
-                 {dt_note}{pilot_note}",
+                 {notes}",
                 event.tc
             )),
             ..step
-        });
+        };
     }
     let events = event_run.collisions as f64;
-    let events_per_disk_time = events / (pilot_scene.particles.len() as f64 * pilot_time);
+    let events_per_disk_time = events / (pilots.scene.particles.len() as f64 * pilot_time);
     // The collisions of the whole run, and the state observed at each of its steps.
     let event_cost = events_per_disk_time * n * sim_time / rates.event_collisions_per_s
         + n * spec.steps as f64 / rates.event_observed_disks_per_s;
@@ -263,10 +317,10 @@ pub fn choose(
         rates.event_collisions_per_s / 1e6,
         rates.event_observed_disks_per_s / 1e6,
     );
-    let choice = if step_passes && step_cost <= event_cost {
+    if step_passes && step_cost <= event_cost {
         Choice {
             reason: Some(format!(
-                "method auto: step, within the tolerance and cheaper; {costs}; {dt_note}{pilot_note}"
+                "method auto: step, within the tolerance and cheaper; {costs}; {notes}"
             )),
             ..step
         }
@@ -278,13 +332,10 @@ pub fn choose(
         };
         Choice {
             method: Method::Event,
-            reason: Some(format!(
-                "method auto: event, {why}; {costs}; {dt_note}{pilot_note}"
-            )),
+            reason: Some(format!("method auto: event, {why}; {costs}; {notes}")),
             ..step
         }
-    };
-    Ok(choice)
+    }
 }
 
 /// The largest fraction on the ladder whose pilot misses at most the tolerance, with its

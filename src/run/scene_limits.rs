@@ -3,8 +3,8 @@
 //! scale must each be finite and within the range where f64 arithmetic keeps the
 //! simulation meaningful. Pure; `scene_file` turns a violation into a located message.
 
+use crate::run::spec::{DtChoice, MethodSpec, SceneSource};
 use crate::sim::scene::{Extent, MassRule, RadiusDistribution};
-use crate::spec::{DtChoice, MethodSpec, SceneSource};
 
 /// Most radii a box may span: positions then keep at least 1e-7 of a radius
 /// (f64 resolves 2.2e-16 of the box).

@@ -6,11 +6,11 @@ use std::path::Path;
 use anyhow::anyhow;
 use plotters::prelude::*;
 
-use crate::output::{Canvas, write_gif, write_png};
+use crate::system::output::{Canvas, write_gif, write_png};
 
+use crate::run::spec::PreparedRun;
 use crate::sim::engine::Engine;
 use crate::sim::{Boundary, Particles, Scene};
-use crate::spec::PreparedRun;
 use crate::view::raster::speed_rgb;
 
 /// Pixels along the longer side of the box.
