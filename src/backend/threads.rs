@@ -333,34 +333,34 @@ impl ThreadedStepper {
 
     /// The grid build, band by band, and every [`REORDER_INTERVAL`] builds the disks
     /// re-stored in grid order (in parallel), exactly when the serial stepper does it.
-    /// Returns the bands it used, cut by the disk counts before the refresh (a first
-    /// build, from scratch, cuts them afterwards): the pair scan uses the same bands.
+    /// Returns the bands it used, cut by the disk counts before the refresh: the pair
+    /// scan uses the same bands. The grid was first built for these disks with the
+    /// stepper ([`StripGrid::with_skin`]): every build here is a refresh.
     fn build_grid(&mut self, particles: &mut Particles) -> Vec<Range<usize>> {
-        let bands = if self.grid.len() != particles.len() {
-            self.grid.build(particles);
-            self.grid.bands(self.n_bands)
-        } else {
-            let bands = self.grid.bands(self.n_bands);
-            let layout = *self.grid.layout();
-            let mut slices = split_into_bands(self.grid.owned_strips_mut(), &bands);
-            self.movers.resize_with(bands.len(), Vec::new);
-            let particles = &*particles;
-            slices
-                .par_iter_mut()
-                .zip(self.movers.par_iter_mut())
-                .for_each(|((first, band), band_movers)| {
-                    // A local, for the reason given in `find_contacts`.
-                    let mut movers = std::mem::take(band_movers);
-                    movers.clear();
-                    refresh_band(&layout, band, *first, particles, &mut movers);
-                    *band_movers = movers;
-                });
-            let movers: Vec<&[Entry]> = self.movers.iter().map(Vec::as_slice).collect();
-            slices
-                .par_iter_mut()
-                .for_each(|(first, band)| receive_band(band, *first, &movers));
-            bands
-        };
+        assert_eq!(
+            self.grid.len(),
+            particles.len(),
+            "the disks the stepper was made for"
+        );
+        let bands = self.grid.bands(self.n_bands);
+        let layout = *self.grid.layout();
+        let mut slices = split_into_bands(self.grid.owned_strips_mut(), &bands);
+        self.movers.resize_with(bands.len(), Vec::new);
+        let now = &*particles;
+        slices
+            .par_iter_mut()
+            .zip(self.movers.par_iter_mut())
+            .for_each(|((first, band), band_movers)| {
+                // A local, for the reason given in `find_contacts`.
+                let mut movers = std::mem::take(band_movers);
+                movers.clear();
+                refresh_band(&layout, band, *first, now, &mut movers);
+                *band_movers = movers;
+            });
+        let movers: Vec<&[Entry]> = self.movers.iter().map(Vec::as_slice).collect();
+        slices
+            .par_iter_mut()
+            .for_each(|(first, band)| receive_band(band, *first, &movers));
         self.builds_since_reorder += 1;
         if self.builds_since_reorder >= REORDER_INTERVAL {
             let strips = self.grid.owned_strips_mut();

@@ -812,8 +812,7 @@ impl Validator<'_> {
                 "enlarge the box, or use boundary = \"walls\"",
             ));
         }
-        let mut grid = StripGrid::new(domain, particles);
-        grid.build(particles);
+        let grid = StripGrid::new(domain, particles);
         let mut contacts = Vec::new();
         grid.find_contacts(particles, domain, &mut contacts);
         if let Some(first) = contacts.iter().min_by_key(|contact| contact.key) {

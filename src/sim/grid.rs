@@ -150,15 +150,21 @@ pub struct StripGrid {
 }
 
 impl StripGrid {
-    /// A grid over the whole box for `particles`.
+    /// A grid over the whole box, built for `particles` where they are.
     pub fn new(domain: &Domain, particles: &Particles) -> StripGrid {
         StripGrid::with_skin(domain, particles, 0.0)
     }
 
-    /// A grid over the whole box whose strips also find pairs within `skin` of touching.
+    /// A grid over the whole box whose strips also find pairs within `skin` of touching,
+    /// built for `particles` where they are. That first build sorts from scratch (a
+    /// placed scene is stored in random spatial order): part of a run's set-up, as for
+    /// the ranks of the distributed backend; the builds of later steps re-sort by
+    /// insertion.
     pub fn with_skin(domain: &Domain, particles: &Particles, skin: f64) -> StripGrid {
         let layout = StripLayout::with_skin(domain, particles, skin);
-        StripGrid::window(domain, layout, 0..layout.n_strips)
+        let mut grid = StripGrid::window(domain, layout, 0..layout.n_strips);
+        grid.build(particles);
+        grid
     }
 
     /// A grid owning the strips `owned` (global indices, not empty) of `layout`, with a
@@ -635,6 +641,10 @@ pub fn refresh_band(
     movers: &mut Vec<Entry>,
 ) {
     let (x, y) = (&particles.x[..], &particles.y[..]);
+    // Radii never change, but the disks may have been re-stored since the grid was
+    // built (a stepper may step disks stored in another order than those it was made
+    // for): with unequal radii, read them again too.
+    let radius = (!layout.has_equal_radii()).then_some(&particles.radius[..]);
     for (offset, strip) in band.iter_mut().enumerate() {
         let here = (first + offset) as u32;
         let mut kept = 0;
@@ -643,6 +653,9 @@ pub fn refresh_band(
             let idx = entry.idx as usize;
             entry.x = x[idx];
             entry.y = y[idx];
+            if let Some(radius) = radius {
+                entry.radius = radius[idx];
+            }
             entry.strip = layout.strip_of(entry.y) as u32;
             if entry.strip == here {
                 strip[kept] = entry;

@@ -445,8 +445,7 @@ mod tests {
     /// The keys of the pairs a fresh search of the whole box finds, in canonical order.
     fn fresh_keys(scene: &Scene, particles: &Particles) -> Vec<u64> {
         let mut fresh = Vec::new();
-        let mut grid = StripGrid::new(&scene.domain, particles);
-        grid.build(particles);
+        let grid = StripGrid::new(&scene.domain, particles);
         grid.find_contacts(particles, &scene.domain, &mut fresh);
         fresh.sort_unstable_by_key(|contact| contact.key);
         keys(&fresh)
