@@ -296,6 +296,13 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
             args.backend.name()
         );
     }
+    if spec.method.draw && matches!(backend, BackendSpec::Mpi { .. }) {
+        bail!(
+            "{}: --draw draws every step, which needs all the disks in one process; drop \
+             --backend mpi (and --ranks) for serial or rayon, or drop --draw",
+            args.scene.display()
+        );
+    }
     spec.slowdown = InjectedSlowdown::new(args.inject_slowdown)
         .context("--inject-slowdown takes a fraction of 0 or more")?;
     let context = || format!("{}", args.scene.display());

@@ -287,6 +287,21 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
                         ),
                     ));
                 }
+                if spec.method.draw && backend == BackendKind::Mpi {
+                    let at = raw
+                        .sweep
+                        .draw
+                        .as_ref()
+                        .map_or(raw.backends.span().start, |d| d.span().start);
+                    return Err(invalid(
+                        at,
+                        format!(
+                            "scene `{scene}` with {} draws every step, which needs all the disks in one process, but `backends` also lists {}; draw in a study of `serial` and `rayon` only (or sweep `draw` over [false] here)",
+                            describe(&overrides),
+                            backend_label(backend)
+                        ),
+                    ));
+                }
                 let configuration = Configuration {
                     scene: scene.clone(),
                     input: input.clone(),
