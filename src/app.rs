@@ -117,6 +117,12 @@ fn render_scene(args: &RenderArgs) -> anyhow::Result<()> {
 
 fn view_scene(args: &ViewArgs) -> anyhow::Result<()> {
     let spec = scene_file::load(&args.scene, &args.overrides)?;
+    if spec.method.draw {
+        bail!(
+            "--draw times offscreen drawing in `collide simulate` and studies; `collide view` \
+             draws every frame already: drop --draw"
+        );
+    }
     if spec.method.method.may_be_event() && args.threads.is_some() {
         bail!(
             "{}: the event method (which method auto may choose) runs on the serial backend \

@@ -190,6 +190,85 @@ fn an_accuracy_study_runs_both_methods_and_reports_pareto_and_stability_figures(
 }
 
 #[test]
+fn a_drawn_study_records_frames_with_drawing_and_reports_the_seeds_figure_5() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    let path = manifest(
+        dir.path(),
+        "repetitions = 1\nwarmups = 0\n[sweep]\ndraw = [true]\n[backends]\nserial = true\nrayon = [1, 2]\n",
+    );
+    let run = run_study(&path, &out, &[]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let rows = records::read(&records::files_in(&out.join("tiny")).unwrap()[0]).unwrap();
+    assert_eq!(rows.len(), 3);
+    for row in &rows {
+        assert!(row.config_key.ends_with(";draw=true"), "{}", row.config_key);
+        assert!(row.drew() && row.draw_s > 0.0, "{row:?}");
+        assert!(row.fps_with_drawing < row.fps, "{row:?}");
+        assert_eq!(row.state_hash, rows[0].state_hash);
+    }
+    let reports = dir.path().join("reports");
+    let report = collide(&[
+        "report",
+        out.join("tiny").to_str().unwrap(),
+        "--out",
+        reports.to_str().unwrap(),
+    ]);
+    assert!(
+        report.status.success(),
+        "{}",
+        String::from_utf8_lossy(&report.stderr)
+    );
+    let text = std::fs::read_to_string(reports.join("report.md")).unwrap();
+    let figure = "setup-1-fps-drawing.png";
+    assert!(text.contains(figure), "{text}");
+    assert!(text.contains("frames/s with drawing"), "{text}");
+    let image = image::open(reports.join(figure)).unwrap().to_rgb8();
+    assert_eq!(image.dimensions(), (900, 560));
+    let rayon = image.pixels().filter(|p| p.0 == [0x1f, 0x77, 0xb4]).count();
+    assert!(rayon > 200, "rayon barely drawn ({rayon})");
+}
+
+#[test]
+fn drawing_with_mpi_is_refused_in_a_manifest_and_on_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    let path = manifest(
+        dir.path(),
+        "[sweep]\ndraw = [true]\n[backends]\nserial = true\nmpi = [2]\n",
+    );
+    let run = run_study(&path, &out, &[]);
+    assert_eq!(run.status.code(), Some(2));
+    let stderr = String::from_utf8(run.stderr).unwrap();
+    for fragment in [
+        "tiny.toml:3",
+        "all the disks in one process",
+        "`mpi = [...]`",
+    ] {
+        assert!(stderr.contains(fragment), "`{fragment}` not in {stderr}");
+    }
+    assert!(!out.join("tiny").exists(), "wrote a results folder");
+    let scene = dir.path().join("scene.toml");
+    let simulate = collide(&[
+        "simulate",
+        scene.to_str().unwrap(),
+        "--draw",
+        "--backend",
+        "mpi",
+    ]);
+    assert_eq!(simulate.status.code(), Some(2));
+    let stderr = String::from_utf8(simulate.stderr).unwrap();
+    assert!(
+        stderr.contains("--draw") && stderr.contains("drop --backend mpi"),
+        "{stderr}"
+    );
+}
+
+#[test]
 fn a_run_over_its_timeout_is_recorded_as_timed_out_and_fails_the_study() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("results");

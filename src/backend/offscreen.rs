@@ -73,3 +73,36 @@ pub fn draw_step(offscreen: &mut Option<Offscreen>, particles: &Particles) {
         offscreen.draw(particles);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::{Boundary, Disk};
+    use crate::view::raster::BACKGROUND;
+
+    #[test]
+    fn each_draw_fills_the_frame_with_the_disks_and_counts_its_seconds() {
+        let domain = Domain {
+            width: 10.0,
+            height: 10.0,
+            boundary: Boundary::Walls,
+        };
+        let disk = |x| Disk {
+            x,
+            y: 5.0,
+            vx: 1.0,
+            vy: 0.0,
+            radius: 1.0,
+            mass: 1.0,
+        };
+        let particles = Particles::from_disks(&[disk(3.0), disk(7.0)]);
+        let mut offscreen = Offscreen::new(&domain, &particles);
+        offscreen.draw(&particles);
+        let pixels = offscreen.pixels();
+        assert_eq!(pixels.len(), DRAW_SIZE.0 * DRAW_SIZE.1);
+        // Two disks of a tenth of the box across: about 2·π·(78 px)² coloured pixels.
+        let coloured = pixels.iter().filter(|&&p| p != BACKGROUND).count();
+        assert!((30_000..45_000).contains(&coloured), "{coloured}");
+        assert!(offscreen.seconds > 0.0);
+    }
+}

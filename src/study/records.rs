@@ -237,13 +237,21 @@ impl Record {
     }
 
     /// The runs one scaling curve compares: the setup, except that in a weak-scaling
-    /// study n grows with the workers, so the curve is keyed by n per worker.
+    /// study n grows with the workers, so the curve is keyed by n per worker. Runs that
+    /// drew every step are a curve of their own: each frame evicts their disks from the
+    /// caches, so even their stepping is slower.
     pub fn series_key(&self) -> String {
-        if self.scaling() == Scaling::Weak {
+        let key = if self.scaling() == Scaling::Weak {
             self.key_with_n(&format!("weak n/worker={}", self.n / self.workers.max(1)))
         } else {
             self.setup_key()
-        }
+        };
+        if self.drew() { key + " drawn" } else { key }
+    }
+
+    /// Whether the run drew every step offscreen (`draw = true`).
+    pub fn drew(&self) -> bool {
+        self.draw_s.is_finite()
     }
 
     fn key_with_n(&self, n: &str) -> String {
