@@ -74,7 +74,7 @@ impl Figure {
             (Figure::Efficiency, Scaling::Strong) => "efficiency E(p) = S(p) / p",
             (Figure::Efficiency, Scaling::Weak) => "weak efficiency T(1, N₀) / T(p, p·N₀)",
             (Figure::Fps, _) => "steps per second (median)",
-            (Figure::Drawing, _) => "frames (steps drawn) per second (median)",
+            (Figure::Drawing, _) => "per second (median): frames drawn, steps (dashed)",
         }
     }
 
@@ -83,7 +83,9 @@ impl Figure {
     fn legend_position(self) -> SeriesLabelPosition {
         match self {
             Figure::Time | Figure::Speedup => SeriesLabelPosition::UpperLeft,
-            Figure::Efficiency | Figure::Fps | Figure::Drawing => SeriesLabelPosition::LowerLeft,
+            Figure::Efficiency | Figure::Fps => SeriesLabelPosition::LowerLeft,
+            // Frames with drawing below, steps without it above: the middle is free.
+            Figure::Drawing => SeriesLabelPosition::MiddleRight,
         }
     }
 
@@ -310,12 +312,24 @@ fn draw(figure: Figure, setup: &Setup, root: &Canvas<'_>) -> anyhow::Result<()> 
             .collect();
         if !beside.is_empty() {
             chart
-                .draw_series(DashedLineSeries::new(beside, 8, 6, colour.stroke_width(2)))
+                .draw_series(DashedLineSeries::new(
+                    beside.iter().copied(),
+                    8,
+                    6,
+                    colour.stroke_width(2),
+                ))
                 .map_err(|e| anyhow!("{e}"))?
                 .label(format!("{}: steps/s without drawing", backend.backend))
                 .legend(move |(x, y)| {
                     PathElement::new([(x, y), (x + 8, y)], colour.stroke_width(2))
                 });
+            chart
+                .draw_series(
+                    beside
+                        .iter()
+                        .map(|&point| Circle::new(point, 4, colour.stroke_width(2))),
+                )
+                .map_err(|e| anyhow!("{e}"))?;
         }
         chart
             .draw_series(points.iter().map(|&(x, (lo, mid, hi))| {
