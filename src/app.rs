@@ -117,6 +117,12 @@ fn render_scene(args: &RenderArgs) -> anyhow::Result<()> {
 
 fn view_scene(args: &ViewArgs) -> anyhow::Result<()> {
     let spec = scene_file::load(&args.scene, &args.overrides)?;
+    if spec.method.draw {
+        bail!(
+            "--draw times offscreen drawing in `collide simulate` and studies; `collide view` \
+             draws every frame already: drop --draw"
+        );
+    }
     if spec.method.method.may_be_event() && args.threads.is_some() {
         bail!(
             "{}: the event method (which method auto may choose) runs on the serial backend \
@@ -294,6 +300,13 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
              only; drop --backend {} (and --threads/--ranks), or use --method step",
             args.scene.display(),
             args.backend.name()
+        );
+    }
+    if spec.method.draw && matches!(backend, BackendSpec::Mpi { .. }) {
+        bail!(
+            "{}: --draw draws every step, which needs all the disks in one process; drop \
+             --backend mpi (and --ranks) for serial or rayon, or drop --draw",
+            args.scene.display()
         );
     }
     spec.slowdown = InjectedSlowdown::new(args.inject_slowdown)

@@ -136,3 +136,35 @@ fn rayon_gives_the_serial_hash_for_a_pile_resting_under_gravity() {
         );
     }
 }
+
+#[test]
+fn drawing_every_step_leaves_the_state_and_reports_frames_with_drawing() {
+    let (name, spec) = scenes().swap_remove(0);
+    let reference = serial::run(&spec).unwrap().summary;
+    assert_eq!(
+        (reference.draw_s, reference.fps_with_drawing),
+        (None, None),
+        "{name}: a run that did not draw"
+    );
+    let mut drawn = spec.clone();
+    drawn.method.draw = true;
+    for (backend, summary) in [
+        ("serial", serial::run(&drawn).unwrap().summary),
+        ("rayon", threads::run(&drawn, threads(2)).unwrap().summary),
+    ] {
+        assert_eq!(
+            summary.state_hash, reference.state_hash,
+            "{name}, {backend}"
+        );
+        let draw_s = summary.draw_s.unwrap();
+        let fps_with_drawing = summary.fps_with_drawing.unwrap();
+        assert!(draw_s > 0.0, "{backend}: {draw_s}");
+        // Frames with drawing: the same steps over the stepping and the drawing time.
+        let expected = summary.steps as f64 / (summary.wall_s + draw_s);
+        assert!(
+            (fps_with_drawing - expected).abs() <= 1e-9 * expected,
+            "{backend}: {fps_with_drawing} against {expected}"
+        );
+        assert!(fps_with_drawing < summary.fps, "{backend}");
+    }
+}

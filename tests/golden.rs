@@ -19,6 +19,8 @@ const TIMINGS: &[&str] = &[
     "cpu_s",
     "setup_s",
     "fps",
+    "draw_s",
+    "fps_with_drawing",
     "particle_steps_per_s",
     "integration_s",
     "broad_phase_s",

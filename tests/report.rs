@@ -47,6 +47,8 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         cpu_s: None,
         setup_s: 0.001,
         fps: 400.0 / wall_s,
+        draw_s: None,
+        fps_with_drawing: None,
         particle_steps_per_s: (n * 400) as f64 / wall_s,
         integration_s: 0.1 * wall_s,
         broad_phase_s: 0.6 * wall_s,
@@ -138,11 +140,14 @@ fn study_records(scaling: &str) -> Vec<Record> {
 
 fn markdown(records: &[Record]) -> String {
     let setups = analysis::analyse(records).unwrap();
-    let figures: Vec<Vec<(Figure, String)>> = (1..=setups.len())
-        .map(|i| {
+    let figures: Vec<Vec<(Figure, String)>> = setups
+        .iter()
+        .enumerate()
+        .map(|(index, setup)| {
             Figure::ALL
                 .iter()
-                .map(|&f| (f, format!("setup-{i}-{}.png", f.file_stem())))
+                .filter(|f| f.shows(setup))
+                .map(|&f| (f, format!("setup-{}-{}.png", index + 1, f.file_stem())))
                 .collect()
         })
         .collect();
@@ -180,6 +185,57 @@ fn every_figure_is_a_png_of_the_stated_size_with_each_backend_drawn() {
         let white = count([255, 255, 255]);
         assert!(white < 900 * 560 * 98 / 100, "{figure:?} is nearly blank");
     }
+}
+
+/// [`records`] as if every step had been drawn, the drawing taking three times the
+/// stepping: frames per second with drawing are a quarter of the steps per second.
+fn drawn_records() -> Vec<Record> {
+    let mut records = records();
+    for record in &mut records {
+        record.draw_s = 3.0 * record.wall_s;
+        record.fps_with_drawing = record.steps as f64 / (record.wall_s + record.draw_s);
+    }
+    records
+}
+
+#[test]
+fn drawn_runs_get_the_frames_per_second_figure_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let setups = analysis::analyse(&drawn_records()).unwrap();
+    assert!(setups[0].drawn);
+    let drawn = scaling::draw_setup(&setups[0], dir.path(), "setup-1").unwrap();
+    assert_eq!(drawn.len(), 5);
+    let (figure, path) = &drawn[4];
+    assert_eq!(*figure, Figure::Drawing);
+    assert!(path.ends_with("setup-1-fps-drawing.png"), "{path:?}");
+    let image = image::open(path).unwrap().to_rgb8();
+    assert_eq!(image.dimensions(), (900, 560));
+    let count = |rgb: [u8; 3]| image.pixels().filter(|p| p.0 == rgb).count();
+    // Each backend twice: frames with drawing, and steps without it (dashed).
+    for (backend, rgb) in [
+        ("serial", [0x33, 0x33, 0x33]),
+        ("rayon", [0x1f, 0x77, 0xb4]),
+        ("mpi", [0xd6, 0x27, 0x28]),
+    ] {
+        assert!(count(rgb) > 200, "{backend} barely drawn ({})", count(rgb));
+    }
+
+    let text = markdown(&drawn_records());
+    assert!(text.contains("every step drawn offscreen"), "{text}");
+    assert!(text.contains("frames/s with drawing |"), "{text}");
+    // rayon at 2: median 0.0056 s for 400 steps, 71429 steps/s; drawing three times as
+    // long, 400 / 0.0224 s = 17857 frames/s.
+    assert!(
+        text.contains("| rayon | 2 | 1.82 | 91% | 0.098 | 71429 | 17857 |"),
+        "{text}"
+    );
+    assert!(text.contains("setup-1-fps-drawing.png"), "{text}");
+    // Undrawn runs have no such figure or column.
+    let plain = markdown(&records());
+    assert!(
+        !plain.contains("fps-drawing") && !plain.contains("with drawing"),
+        "{plain}"
+    );
 }
 
 #[test]

@@ -4,7 +4,7 @@
 use std::os::unix::fs::PermissionsExt;
 use std::time::{Duration, Instant};
 
-use collide::study::records::{self, STATUS_TIMED_OUT};
+use collide::study::records::{self, Record, STATUS_TIMED_OUT};
 
 use crate::util::{
     collide, interrupt_after_first_row, manifest, processes_mentioning, run_study, sample_records,
@@ -139,22 +139,12 @@ fn a_study_records_every_repetition_and_resume_runs_only_what_is_missing() {
 
 #[test]
 fn an_accuracy_study_runs_both_methods_and_reports_pareto_and_stability_figures() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("results");
-    let path = manifest(
-        dir.path(),
+    let (dir, results, rows) = tiny_study(
         "repetitions = 1\nwarmups = 0\n[sweep]\ndt = [0.5, 0.1, 0.1]\nsteps = [4, 20, 20]\n\
          method = [\"step\", \"step\", \"event\"]\n\
          observe = [\"accuracy\", \"accuracy\", \"timing\"]\n\
          zip = [\"dt\", \"steps\", \"method\", \"observe\"]\n[backends]\nserial = true\n",
     );
-    let run = run_study(&path, &out, &[]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let rows = records::read(&records::files_in(&out.join("tiny")).unwrap()[0]).unwrap();
     let methods: Vec<(&str, &str)> = rows
         .iter()
         .map(|r| (r.method.as_str(), r.observe.as_str()))
@@ -170,9 +160,93 @@ fn an_accuracy_study_runs_both_methods_and_reports_pareto_and_stability_figures(
     assert!(rows.iter().all(|r| r.rms_step_over_radius > 0.0));
     assert!(rows[0].missed_collisions.is_some() && rows[2].missed_collisions == Some(0));
     let reports = dir.path().join("reports");
+    let text = report_of(&results, &reports);
+    assert!(text.contains("## Accuracy"), "{text}");
+    for figure in ["accuracy-pareto.png", "accuracy-stability.png"] {
+        assert!(text.contains(figure), "{text}");
+        assert!(reports.join(figure).exists(), "{figure}");
+    }
+}
+
+#[test]
+fn a_drawn_study_records_frames_with_drawing_and_reports_the_seeds_figure_5() {
+    let (dir, results, rows) = tiny_study(
+        "repetitions = 1\nwarmups = 0\n[sweep]\ndraw = [true]\n[backends]\nserial = true\nrayon = [1, 2]\n",
+    );
+    assert_eq!(rows.len(), 3);
+    for row in &rows {
+        assert!(row.config_key.ends_with(";draw=true"), "{}", row.config_key);
+        assert!(row.drew() && row.draw_s > 0.0, "{row:?}");
+        assert!(row.fps_with_drawing < row.fps, "{row:?}");
+        assert_eq!(row.state_hash, rows[0].state_hash);
+    }
+    let reports = dir.path().join("reports");
+    let text = report_of(&results, &reports);
+    let figure = "setup-1-fps-drawing.png";
+    assert!(text.contains(figure), "{text}");
+    assert!(text.contains("frames/s with drawing"), "{text}");
+    let image = image::open(reports.join(figure)).unwrap().to_rgb8();
+    assert_eq!(image.dimensions(), (900, 560));
+    let rayon = image.pixels().filter(|p| p.0 == [0x1f, 0x77, 0xb4]).count();
+    assert!(rayon > 200, "rayon barely drawn ({rayon})");
+}
+
+#[test]
+fn drawing_with_mpi_is_refused_in_a_manifest_and_on_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    let path = manifest(
+        dir.path(),
+        "[sweep]\ndraw = [true]\n[backends]\nserial = true\nmpi = [2]\n",
+    );
+    let run = run_study(&path, &out, &[]);
+    assert_eq!(run.status.code(), Some(2));
+    let stderr = String::from_utf8(run.stderr).unwrap();
+    for fragment in [
+        "tiny.toml:3",
+        "all the disks in one process",
+        "`mpi = [...]`",
+    ] {
+        assert!(stderr.contains(fragment), "`{fragment}` not in {stderr}");
+    }
+    assert!(!out.join("tiny").exists(), "wrote a results folder");
+    let scene = dir.path().join("scene.toml");
+    let simulate = collide(&[
+        "simulate",
+        scene.to_str().unwrap(),
+        "--draw",
+        "--backend",
+        "mpi",
+    ]);
+    assert_eq!(simulate.status.code(), Some(2));
+    let stderr = String::from_utf8(simulate.stderr).unwrap();
+    assert!(
+        stderr.contains("--draw") && stderr.contains("drop --backend mpi"),
+        "{stderr}"
+    );
+}
+
+/// The tiny study with `body` run in a temporary folder, which must succeed: the folder,
+/// the study's results folder and its records.
+fn tiny_study(body: &str) -> (tempfile::TempDir, std::path::PathBuf, Vec<Record>) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    let run = run_study(&manifest(dir.path(), body), &out, &[]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let results = out.join("tiny");
+    let rows = records::read(&records::files_in(&results).unwrap()[0]).unwrap();
+    (dir, results, rows)
+}
+
+/// `collide report RESULTS --out REPORTS`, which must succeed; the text of its report.md.
+fn report_of(results: &std::path::Path, reports: &std::path::Path) -> String {
     let report = collide(&[
         "report",
-        out.join("tiny").to_str().unwrap(),
+        results.to_str().unwrap(),
         "--out",
         reports.to_str().unwrap(),
     ]);
@@ -181,12 +255,7 @@ fn an_accuracy_study_runs_both_methods_and_reports_pareto_and_stability_figures(
         "{}",
         String::from_utf8_lossy(&report.stderr)
     );
-    let text = std::fs::read_to_string(reports.join("report.md")).unwrap();
-    assert!(text.contains("## Accuracy"), "{text}");
-    for figure in ["accuracy-pareto.png", "accuracy-stability.png"] {
-        assert!(text.contains(figure), "{text}");
-        assert!(reports.join(figure).exists(), "{figure}");
-    }
+    std::fs::read_to_string(reports.join("report.md")).unwrap()
 }
 
 #[test]

@@ -109,6 +109,8 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         counters,
         initial: observe(&scene.particles),
         accuracy: Accuracy::default(),
+        // Drawing needs every disk in one process: refused before an MPI run starts.
+        draw_s: None,
     };
     let workers = Workers {
         backend: "mpi",

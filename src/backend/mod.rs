@@ -9,6 +9,7 @@ pub mod distributed;
 pub mod launcher;
 #[cfg(feature = "mpi")]
 pub mod mpi;
+pub mod offscreen;
 pub mod serial;
 pub mod threads;
 
@@ -161,6 +162,9 @@ pub struct Measured {
     pub counters: StepCounters,
     pub initial: Observables,
     pub accuracy: Accuracy,
+    /// Seconds drawing every step offscreen (`draw = true`), outside `wall_s`; `None`
+    /// when the run did not draw.
+    pub draw_s: Option<f64>,
 }
 
 /// What a backend observed beyond the counters; `None` where it does not observe it.
@@ -254,6 +258,10 @@ pub fn summarize(
         cpu_s: measured.cpu_s,
         setup_s: measured.setup_s,
         fps: steps as f64 / wall_s,
+        draw_s: measured.draw_s,
+        fps_with_drawing: measured
+            .draw_s
+            .map(|draw_s| steps as f64 / (wall_s + draw_s)),
         particle_steps_per_s: (n as f64 * steps as f64) / wall_s,
         integration_s: measured.stages.integration,
         broad_phase_s: measured.stages.broad_phase,

@@ -4,6 +4,7 @@
 use std::ops::ControlFlow;
 use std::time::Instant;
 
+use crate::backend::offscreen::{Offscreen, draw_step};
 use crate::backend::{
     Accuracy, BackendError, Collapse, CpuScope, Measured, RunOutcome, StageSeconds, Workers,
     is_curve_sample, step_loop, summarize, timed,
@@ -15,14 +16,15 @@ use crate::sim::event::EventSim;
 use crate::sim::observe::{MissedCollisions, observe};
 
 /// Builds the scene, runs it on one thread with its method, and measures the run
-/// stage by stage. Observing (the temperature curve, missed collisions) is timed apart
-/// and left out of `wall_s`.
+/// stage by stage. Observing (the temperature curve, missed collisions) and drawing
+/// (`draw = true`) are timed apart and left out of `wall_s`.
 pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
     let setup_start = Instant::now();
     let mut prepared = spec.prepare()?;
     let mut particles = prepared.take_particles();
     let initial = observe(&particles);
     let mut curve = Curve::new(&particles);
+    let mut offscreen = Offscreen::when(spec.method.draw, &prepared.scene.domain, &particles);
     let mut stages = StageSeconds::default();
     let (setup_s, seconds, counters, mut accuracy) = match prepared.method {
         Method::Step => {
@@ -56,6 +58,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
                     }
                 }
                 curve.sample(&prepared, step, &particles);
+                draw_step(&mut offscreen, &particles);
                 ControlFlow::Continue(())
             });
             let accuracy = Accuracy {
@@ -74,6 +77,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
                 timed(&mut stages.collisions, || {
                     sim.advance_to(&mut particles, step as f64 * prepared.params.dt)
                 });
+                draw_step(&mut offscreen, &particles);
                 match sim.collapse_time() {
                     // The run ends where the method broke down; so does its curve.
                     Some(time) => {
@@ -95,9 +99,11 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
             (setup_s, seconds, sim.counters(), accuracy)
         }
     };
-    // Observing is single-threaded work inside the loop: out of both clocks.
-    let wall_s = seconds.wall - curve.seconds;
-    let cpu_s = seconds.cpu.map(|cpu| cpu - curve.seconds);
+    // Observing and drawing are single-threaded work inside the loop: out of both clocks.
+    let draw_s = offscreen.map(|offscreen| offscreen.seconds);
+    let apart = curve.seconds + draw_s.unwrap_or(0.0);
+    let wall_s = seconds.wall - apart;
+    let cpu_s = seconds.cpu.map(|cpu| cpu - apart);
     accuracy.temperature_curve = Some(curve.points);
     let measured = Measured {
         setup_s,
@@ -107,6 +113,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
         counters,
         initial,
         accuracy,
+        draw_s,
     };
     let workers = Workers {
         backend: "serial",

@@ -15,6 +15,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use crate::backend::offscreen::{Offscreen, draw_step};
 use crate::backend::{
     Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
     summarize, timed,
@@ -63,22 +64,30 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
     );
     let setup_s = setup_start.elapsed().as_secs_f64();
     let initial = observe(&particles);
+    let mut offscreen = Offscreen::when(spec.method.draw, &prepared.scene.domain, &particles);
 
     let seconds = pool.install(|| {
         step_loop(prepared.steps, spec.slowdown, CpuScope::Process, |_| {
             stepper.step(&mut particles);
+            // The snapshot and the rasterizer are serial: drawing runs on this thread.
+            draw_step(&mut offscreen, &particles);
             ControlFlow::Continue(())
         })
     });
 
+    // Drawing is out of both clocks: its own seconds (CPU the pool's waiting threads
+    // spend spinning before they sleep stays in `cpu_s`).
+    let draw_s = offscreen.map(|offscreen| offscreen.seconds);
+    let apart = draw_s.unwrap_or(0.0);
     let measured = Measured {
         setup_s,
-        wall_s: seconds.wall,
-        cpu_s: seconds.cpu,
+        wall_s: seconds.wall - apart,
+        cpu_s: seconds.cpu.map(|cpu| cpu - apart),
         stages: stepper.stages,
         counters: stepper.counters,
         initial,
         accuracy: Accuracy::default(),
+        draw_s,
     };
     let workers = Workers {
         backend: "rayon",

@@ -22,6 +22,9 @@ pub struct Point {
     pub max_s: f64,
     /// Median steps per second.
     pub fps: f64,
+    /// Median frames per second with drawing of the runs that drew every step (NaN
+    /// when none did).
+    pub fps_with_drawing: f64,
     pub oversubscribed: bool,
     /// Strong scaling: T(baseline) / T(p), with [`Setup::baseline`]. Weak scaling: the
     /// scaled speedup p·E(p).
@@ -75,6 +78,8 @@ pub struct Setup {
     pub dt: f64,
     pub packing: f64,
     pub broadphase: String,
+    /// Whether its runs drew every step offscreen (`draw = true`).
+    pub drawn: bool,
     /// Serial first, then rayon, then MPI.
     pub backends: Vec<BackendScaling>,
     /// The most distinct final-state hashes among the successful runs of one physical
@@ -137,6 +142,7 @@ pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {
                     dt: first.dt,
                     packing: first.packing,
                     broadphase: first.broadphase.clone(),
+                    drawn: first.drew(),
                     backends: Vec::new(),
                     distinct_hashes: hashes.get(&series).copied().unwrap_or(1),
                 });
@@ -183,6 +189,7 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Poi
             col("wall_s").max().alias("max_s"),
             len().cast(DataType::UInt64).alias("reps"),
             col("fps").median().alias("fps"),
+            col("fps_with_drawing").median().alias("fps_with_drawing"),
             col("oversubscribed").any(true).alias("oversubscribed"),
         ])
         .collect()?;
@@ -194,6 +201,7 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Poi
     let max_s = table.column("max_s")?.f64()?;
     let reps = table.column("reps")?.u64()?;
     let fps = table.column("fps")?.f64()?;
+    let fps_with_drawing = table.column("fps_with_drawing")?.f64()?;
     let oversubscribed = table.column("oversubscribed")?.bool()?;
     Ok((0..table.height())
         .map(|i| {
@@ -204,6 +212,7 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Poi
                 min_s: min_s.get(i).unwrap_or(f64::NAN),
                 max_s: max_s.get(i).unwrap_or(f64::NAN),
                 fps: fps.get(i).unwrap_or(f64::NAN),
+                fps_with_drawing: fps_with_drawing.get(i).unwrap_or(f64::NAN),
                 oversubscribed: oversubscribed.get(i).unwrap_or_default(),
                 speedup: f64::NAN,
                 efficiency: f64::NAN,
@@ -336,6 +345,7 @@ mod tests {
             min_s: median_s,
             max_s: median_s,
             fps: 1.0 / median_s,
+            fps_with_drawing: f64::NAN,
             oversubscribed: false,
             speedup: f64::NAN,
             efficiency: f64::NAN,

@@ -268,8 +268,13 @@ pub fn describe(setup: &Setup) -> String {
         Scaling::Strong => format!("n = {}", setup.n),
         Scaling::Weak => format!("weak scaling, n = {} × workers", setup.n),
     };
+    let drawn = if setup.drawn {
+        ", every step drawn offscreen"
+    } else {
+        ""
+    };
     format!(
-        "scene `{}`, {n}, {} steps of dt = {}, packing {:.3}, {} broad phase",
+        "scene `{}`, {n}, {} steps of dt = {}, packing {:.3}, {} broad phase{drawn}",
         setup.scene, setup.steps, setup.dt, setup.packing, setup.broadphase
     )
 }
@@ -344,9 +349,14 @@ fn setup_section(out: &mut String, setup: &Setup) {
             backend.backend
         );
     }
+    let (drawn_header, drawn_rule) = if setup.drawn {
+        (" frames/s with drawing |", " ---: |")
+    } else {
+        ("", "")
+    };
     let _ = writeln!(
         out,
-        "\n| backend | workers | speedup S(p) | efficiency E(p) | Karp–Flatt e(p) | steps/s |\n| --- | ---: | ---: | ---: | ---: | ---: |"
+        "\n| backend | workers | speedup S(p) | efficiency E(p) | Karp–Flatt e(p) | steps/s |{drawn_header}\n| --- | ---: | ---: | ---: | ---: | ---: |{drawn_rule}"
     );
     for backend in &setup.backends {
         for point in &backend.points {
@@ -355,9 +365,14 @@ fn setup_section(out: &mut String, setup: &Setup) {
             } else {
                 "—".to_owned()
             };
+            let drawn = if setup.drawn {
+                format!(" {:.0} |", point.fps_with_drawing)
+            } else {
+                String::new()
+            };
             let _ = writeln!(
                 out,
-                "| {} | {} | {:.2} | {:.0}% | {karp_flatt} | {:.0} |",
+                "| {} | {} | {:.2} | {:.0}% | {karp_flatt} | {:.0} |{drawn}",
                 backend.backend,
                 point.workers,
                 point.speedup,
@@ -380,6 +395,15 @@ fn setup_section(out: &mut String, setup: &Setup) {
         .collect();
     // A blank line ends the table, whatever follows it.
     let _ = writeln!(out);
+    if setup.drawn {
+        let _ = writeln!(
+            out,
+            "Every step of these runs was drawn offscreen, whole box at 800 × 800 pixels with \
+             the live view's renderer: steps/s counts the stepping alone, frames/s with drawing \
+             also the snapshot and the drawing of each step (the seed's Figure 5: the \
+             `fps-drawing` figure).\n"
+        );
+    }
     if !fits.is_empty() {
         let _ = writeln!(
             out,

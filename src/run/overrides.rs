@@ -39,6 +39,12 @@ impl OverrideValue for u64 {
     }
 }
 
+impl OverrideValue for bool {
+    fn text(&self) -> String {
+        self.to_string()
+    }
+}
+
 impl OverrideValue for f64 {
     fn text(&self) -> String {
         self.to_string()
@@ -173,6 +179,12 @@ overrides! {
     /// default 1e-4 · r_min / v_rms).
     #[arg(long, allow_hyphen_values = true)]
     tc: f64,
+    /// Draw the whole box offscreen after every step, as `collide view` draws it (800 ×
+    /// 800 pixels, no window), timed apart from the stepping loop: the result gains
+    /// `draw_s` and `fps_with_drawing`. `--draw` alone means true; serial and rayon
+    /// backends only.
+    #[arg(long, num_args = 0..=1, default_missing_value = "true")]
+    draw: bool,
 }
 
 /// Adds the list `values` of the override `key` (if given) to `lists`.

@@ -320,6 +320,7 @@ impl Validator<'_> {
             missed_tolerance,
             tc,
             observe,
+            draw: overrides.draw.unwrap_or(false),
         })
     }
 

@@ -121,6 +121,9 @@ pub struct MethodSpec {
     /// TC model time of the event method (≥ 0); `None`: [`DEFAULT_TC_FRACTION`] of r_min / v_rms.
     pub tc: Option<f64>,
     pub observe: Observe,
+    /// Draw the whole box offscreen after every step (the live view's renderer, timed
+    /// apart from the stepping loop); serial and rayon backends only.
+    pub draw: bool,
 }
 
 impl MethodSpec {
@@ -134,6 +137,7 @@ impl MethodSpec {
             missed_tolerance: DEFAULT_MISSED_TOLERANCE,
             tc: None,
             observe: Observe::Timing,
+            draw: false,
         }
     }
 }

@@ -43,6 +43,15 @@ pub struct RunSummary {
     pub setup_s: f64,
     /// Steps per second of `wall_s`.
     pub fps: f64,
+    /// Seconds drawing the whole box offscreen after every step (`draw = true`: filling
+    /// the snapshot and rasterizing it at 800 × 800, as `collide view` draws), outside
+    /// `wall_s`; null when the run did not draw.
+    #[serde(default)]
+    pub draw_s: Option<f64>,
+    /// Frames per second with drawing, the seed's Figure 5: steps / (wall_s + draw_s);
+    /// null when the run did not draw.
+    #[serde(default)]
+    pub fps_with_drawing: Option<f64>,
     /// n × steps / wall_s.
     pub particle_steps_per_s: f64,
     /// Seconds of `wall_s` moving disks and applying the boundary.
@@ -197,6 +206,12 @@ impl fmt::Display for RunSummary {
             "time       {:.4} s stepping ({:.1} steps/s, {:.3e} particle-steps/s), {:.4} s setup",
             self.wall_s, self.fps, self.particle_steps_per_s, self.setup_s
         )?;
+        if let (Some(draw_s), Some(fps_with_drawing)) = (self.draw_s, self.fps_with_drawing) {
+            writeln!(
+                f,
+                "drawing    {draw_s:.4} s drawing every step offscreen ({fps_with_drawing:.1} frames/s with drawing)"
+            )?;
+        }
         writeln!(
             f,
             "stages     {:.4} s integration, {:.4} s broad phase, {:.4} s collisions, {:.4} s communication",

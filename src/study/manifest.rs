@@ -272,19 +272,30 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
                 };
                 let footprint = spec.footprint(copies);
                 check_memory(&footprint, machine).map_err(in_scene)?;
-                if spec.method.method.may_be_event() && backend != BackendKind::Serial {
-                    let at = raw
-                        .sweep
-                        .method
-                        .as_ref()
-                        .map_or(raw.backends.span().start, |m| m.span().start);
-                    return Err(invalid(
-                        at,
+                // What the backend cannot run, at the swept key that asks for it (else at
+                // `backends`).
+                let refuse = |swept: Option<usize>, does: &str, fix: &str| {
+                    invalid(
+                        swept.unwrap_or(raw.backends.span().start),
                         format!(
-                            "scene `{scene}` with {} runs the event method, which runs on the serial backend only, but `backends` also lists {}; run the event method in a study with only `serial = true` (or sweep `method` over [\"step\"] here)",
+                            "scene `{scene}` with {} {does}, but `backends` also lists {}; {fix}",
                             describe(&overrides),
                             backend_label(backend)
                         ),
+                    )
+                };
+                if spec.method.method.may_be_event() && backend != BackendKind::Serial {
+                    return Err(refuse(
+                        raw.sweep.method.as_ref().map(|m| m.span().start),
+                        "runs the event method, which runs on the serial backend only",
+                        "run the event method in a study with only `serial = true` (or sweep `method` over [\"step\"] here)",
+                    ));
+                }
+                if spec.method.draw && backend == BackendKind::Mpi {
+                    return Err(refuse(
+                        raw.sweep.draw.as_ref().map(|d| d.span().start),
+                        "draws every step, which needs all the disks in one process",
+                        "draw in a study of `serial` and `rayon` only (or sweep `draw` over [false] here)",
                     ));
                 }
                 let configuration = Configuration {
@@ -642,6 +653,30 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.starts_with("m.toml:3: `sweep.tc` is empty"), "{err}");
+    }
+
+    #[test]
+    fn the_figure_5_manifest_draws_serial_and_rayon_runs() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("experiments/seed-figure5.toml");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let study = parse(&path, &text, &MACHINE).unwrap();
+        let runs: Vec<(BackendKind, usize)> = study
+            .configurations
+            .iter()
+            .map(|c| (c.backend, c.workers))
+            .collect();
+        assert_eq!(
+            runs,
+            [
+                (BackendKind::Serial, 1),
+                (BackendKind::Rayon, 1),
+                (BackendKind::Rayon, 2)
+            ]
+        );
+        for configuration in &study.configurations {
+            assert_eq!(configuration.overrides.draw, Some(true));
+            assert_eq!(configuration.overrides.n, Some(2000));
+        }
     }
 
     #[test]

@@ -16,7 +16,7 @@ use crate::study::environment::Environment;
 use crate::study::manifest::Scaling;
 use crate::system::output::write_atomically;
 
-pub const SCHEMA_VERSION: u32 = 6;
+pub const SCHEMA_VERSION: u32 = 7;
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
 const OLDEST_READABLE_VERSION: u32 = 1;
 
@@ -65,6 +65,9 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     (6, "max_wall_penetration", Fill::F64(f64::NAN)),
     (6, "usable_cpus", Fill::NullU64),
     (6, "cpu_affinity", Fill::Str("")),
+    // Version 6 never drew a run offscreen.
+    (7, "draw_s", Fill::F64(f64::NAN)),
+    (7, "fps_with_drawing", Fill::F64(f64::NAN)),
 ];
 
 /// What became of one run.
@@ -234,13 +237,21 @@ impl Record {
     }
 
     /// The runs one scaling curve compares: the setup, except that in a weak-scaling
-    /// study n grows with the workers, so the curve is keyed by n per worker.
+    /// study n grows with the workers, so the curve is keyed by n per worker. Runs that
+    /// drew every step are a curve of their own: each frame evicts their disks from the
+    /// caches, so even their stepping is slower.
     pub fn series_key(&self) -> String {
-        if self.scaling() == Scaling::Weak {
+        let key = if self.scaling() == Scaling::Weak {
             self.key_with_n(&format!("weak n/worker={}", self.n / self.workers.max(1)))
         } else {
             self.setup_key()
-        }
+        };
+        if self.drew() { key + " drawn" } else { key }
+    }
+
+    /// Whether the run drew every step offscreen (`draw = true`).
+    pub fn drew(&self) -> bool {
+        self.draw_s.is_finite()
     }
 
     fn key_with_n(&self, n: &str) -> String {
@@ -308,7 +319,7 @@ macro_rules! for_each_column {
                  memory_bytes;
             u32: repetition;
             f64: dt <- run, packing <- run, wall_s <- run, cpu_s <- run, setup_s <- run,
-                 fps <- run, particle_steps_per_s <- run, integration_s <- run,
+                 fps <- run, draw_s <- run, fps_with_drawing <- run, particle_steps_per_s <- run, integration_s <- run,
                  broad_phase_s <- run, collision_s <- run, communication_s <- run,
                  kinetic_energy_initial <- run, kinetic_energy_final <- run, momentum_initial_x,
                  momentum_initial_y, momentum_final_x, momentum_final_y, max_overlap <- run,

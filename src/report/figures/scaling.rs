@@ -1,6 +1,7 @@
 //! The scaling figures of one setup: time, speedup, efficiency and steps per second
-//! against workers, one colour per backend in every figure, error bars from the
-//! repetitions, log axes.
+//! against workers, and for runs that drew every step the frames per second with
+//! drawing beside their steps per second; one colour per backend in every figure, error
+//! bars from the repetitions, log axes.
 
 use std::path::{Path, PathBuf};
 
@@ -24,17 +25,26 @@ pub enum Figure {
     Speedup,
     /// E(p), with the 75% line the findings use.
     Efficiency,
-    /// Median steps per second (the seed's Figure 5).
+    /// Median steps per second, nothing drawn.
     Fps,
+    /// Median frames per second with drawing (the seed's Figure 5), beside the same runs'
+    /// steps per second without it (dashed); only for runs that drew every step.
+    Drawing,
 }
 
 impl Figure {
-    pub const ALL: [Figure; 4] = [
+    pub const ALL: [Figure; 5] = [
         Figure::Time,
         Figure::Speedup,
         Figure::Efficiency,
         Figure::Fps,
+        Figure::Drawing,
     ];
+
+    /// Whether `setup` has anything to show in this figure.
+    pub fn shows(self, setup: &Setup) -> bool {
+        self != Figure::Drawing || setup.drawn
+    }
 
     pub fn file_stem(self) -> &'static str {
         match self {
@@ -42,6 +52,7 @@ impl Figure {
             Figure::Speedup => "speedup",
             Figure::Efficiency => "efficiency",
             Figure::Fps => "fps",
+            Figure::Drawing => "fps-drawing",
         }
     }
 
@@ -51,6 +62,7 @@ impl Figure {
             Figure::Speedup => "Speedup",
             Figure::Efficiency => "Parallel efficiency",
             Figure::Fps => "Steps per second",
+            Figure::Drawing => "Frames per second with drawing",
         }
     }
 
@@ -62,6 +74,7 @@ impl Figure {
             (Figure::Efficiency, Scaling::Strong) => "efficiency E(p) = S(p) / p",
             (Figure::Efficiency, Scaling::Weak) => "weak efficiency T(1, N₀) / T(p, p·N₀)",
             (Figure::Fps, _) => "steps per second (median)",
+            (Figure::Drawing, _) => "per second (median): frames drawn, steps (dashed)",
         }
     }
 
@@ -71,6 +84,8 @@ impl Figure {
         match self {
             Figure::Time | Figure::Speedup => SeriesLabelPosition::UpperLeft,
             Figure::Efficiency | Figure::Fps => SeriesLabelPosition::LowerLeft,
+            // Frames with drawing below, steps without it above: the middle is free.
+            Figure::Drawing => SeriesLabelPosition::MiddleRight,
         }
     }
 
@@ -81,7 +96,17 @@ impl Figure {
             Figure::Speedup => (point.speedup, point.speedup, point.speedup),
             Figure::Efficiency => (point.efficiency, point.efficiency, point.efficiency),
             Figure::Fps => (point.fps, point.fps, point.fps),
+            Figure::Drawing => {
+                let fps = point.fps_with_drawing;
+                (fps, fps, fps)
+            }
         }
+    }
+
+    /// The values drawn dashed beside this figure's, from the same runs: the step rate
+    /// without drawing beside the frame rate with it.
+    fn beside(self, point: &crate::report::analysis::Point) -> Option<f64> {
+        (self == Figure::Drawing).then_some(point.fps)
     }
 }
 
@@ -114,6 +139,7 @@ pub fn draw_setup(
 ) -> anyhow::Result<Vec<(Figure, PathBuf)>> {
     Figure::ALL
         .into_iter()
+        .filter(|figure| figure.shows(setup))
         .map(|figure| {
             let chart = ScalingChart {
                 figure,
@@ -182,7 +208,7 @@ fn draw(figure: Figure, setup: &Setup, root: &Canvas<'_>) -> anyhow::Result<()> 
         .flat_map(|b| b.points.iter())
         .flat_map(|p| {
             let (low, mid, high) = figure.values(p);
-            [low, mid, high]
+            [low, mid, high, figure.beside(p).unwrap_or(f64::NAN)]
         })
         .filter(|v| v.is_finite() && *v > 0.0)
         .collect();
@@ -273,8 +299,38 @@ fn draw(figure: Figure, setup: &Setup, root: &Canvas<'_>) -> anyhow::Result<()> 
                 colour.stroke_width(2),
             ))
             .map_err(|e| anyhow!("{e}"))?
-            .label(backend.backend.as_str())
+            .label(match figure {
+                Figure::Drawing => format!("{}: frames/s with drawing", backend.backend),
+                _ => backend.backend.clone(),
+            })
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2)));
+        let beside: Vec<(f64, f64)> = backend
+            .points
+            .iter()
+            .filter_map(|p| Some((p.workers as f64, figure.beside(p)?)))
+            .filter(|(_, value)| value.is_finite() && *value > 0.0)
+            .collect();
+        if !beside.is_empty() {
+            chart
+                .draw_series(DashedLineSeries::new(
+                    beside.iter().copied(),
+                    8,
+                    6,
+                    colour.stroke_width(2),
+                ))
+                .map_err(|e| anyhow!("{e}"))?
+                .label(format!("{}: steps/s without drawing", backend.backend))
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 8, y)], colour.stroke_width(2))
+                });
+            chart
+                .draw_series(
+                    beside
+                        .iter()
+                        .map(|&point| Circle::new(point, 4, colour.stroke_width(2))),
+                )
+                .map_err(|e| anyhow!("{e}"))?;
+        }
         chart
             .draw_series(points.iter().map(|&(x, (lo, mid, hi))| {
                 ErrorBar::new_vertical(x, lo, mid, hi, colour.filled(), 8)
