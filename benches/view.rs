@@ -9,11 +9,10 @@
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 
+use collide::draw::raster::{Frame, View, draw, fast_speed};
 use collide::sim::Scene;
 use collide::sim::scene::GasSpec;
 use collide::sim::snapshot::Snapshot;
-use collide::view::raster::{Frame, View, draw};
-use collide::view::render::fast_speed;
 use collide::view::status::{STATUS_ROWS, StatusFont};
 
 const PIXELS: usize = 800;

@@ -9,6 +9,7 @@ pub mod app;
 pub mod backend;
 pub mod check;
 pub mod cli;
+pub mod draw;
 pub mod exit;
 pub mod report;
 pub mod run;

@@ -11,9 +11,9 @@ use std::time::Duration;
 
 use x11rb::protocol::xproto::{ConnectionExt, ImageFormat};
 
+use collide::draw::raster::{Frame, View, draw};
 use collide::sim::scene::GasSpec;
 use collide::sim::snapshot::Snapshot;
-use collide::view::raster::{Frame, View, draw};
 use collide::view::status::{STATUS_ROWS, StatusFont};
 use collide::view::window::Screen;
 

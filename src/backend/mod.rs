@@ -9,7 +9,6 @@ pub mod distributed;
 pub mod launcher;
 #[cfg(feature = "mpi")]
 pub mod mpi;
-pub mod offscreen;
 pub mod serial;
 pub mod threads;
 
@@ -22,7 +21,7 @@ use crate::run::summary::RunSummary;
 use crate::sim::observe::{Observables, observe, state_hash, thermodynamics};
 use crate::sim::scene::PlacementError;
 use crate::sim::{Particles, StepCounters};
-pub use crate::system::machine::CpuScope;
+pub use crate::system::machine::{CpuScope, timed};
 use crate::system::machine::{LoopSeconds, cpu_seconds, usable_cpus};
 
 /// Which backend runs the steps, with its worker count.
@@ -71,15 +70,6 @@ pub struct StageSeconds {
     pub collisions: f64,
     /// Exchanging disks and results between ranks (MPI only).
     pub communication: f64,
-}
-
-/// Runs `work` and adds its wall time to `seconds`.
-#[inline]
-pub fn timed<T>(seconds: &mut f64, work: impl FnOnce() -> T) -> T {
-    let start = Instant::now();
-    let result = work();
-    *seconds += start.elapsed().as_secs_f64();
-    result
 }
 
 /// The stepping loop every backend times: `step(1)` to `step(steps)`, each followed by

@@ -4,11 +4,11 @@
 use std::ops::ControlFlow;
 use std::time::Instant;
 
-use crate::backend::offscreen::{Offscreen, draw_step};
 use crate::backend::{
     Accuracy, BackendError, Collapse, CpuScope, Measured, RunOutcome, StageSeconds, Workers,
     is_curve_sample, step_loop, summarize, timed,
 };
+use crate::draw::offscreen::{Offscreen, draw_step};
 use crate::run::spec::{Method, Observe, PreparedRun, RunSpec};
 use crate::sim::Particles;
 use crate::sim::Stepper;

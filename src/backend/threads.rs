@@ -15,11 +15,11 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::backend::offscreen::{Offscreen, draw_step};
 use crate::backend::{
     Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
     summarize, timed,
 };
+use crate::draw::offscreen::{Offscreen, draw_step};
 use crate::run::spec::RunSpec;
 use crate::sim::collision::DiskState;
 use crate::sim::grid::{

@@ -4,6 +4,7 @@
 //! environment all ask here.
 
 use std::num::NonZeroUsize;
+use std::time::Instant;
 
 /// Whose CPU time a backend's stepping loop counts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -95,6 +96,15 @@ fn memory_bytes(meminfo: &str) -> Option<u64> {
     let line = meminfo.lines().find(|line| line.starts_with("MemTotal:"))?;
     let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kib * 1024)
+}
+
+/// Runs `work` and adds its wall time to `seconds`.
+#[inline]
+pub fn timed<T>(seconds: &mut f64, work: impl FnOnce() -> T) -> T {
+    let start = Instant::now();
+    let result = work();
+    *seconds += start.elapsed().as_secs_f64();
+    result
 }
 
 #[cfg(test)]

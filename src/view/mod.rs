@@ -3,7 +3,6 @@
 //! a window (`window`). The simulation core only fills snapshots; nothing here steps it
 //! differently from `collide simulate`.
 
-pub mod raster;
 pub mod render;
 pub mod status;
 pub mod window;

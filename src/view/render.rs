@@ -8,10 +8,10 @@ use plotters::prelude::*;
 
 use crate::system::output::{Canvas, write_gif, write_png};
 
+use crate::draw::raster::{fast_speed, speed_rgb};
 use crate::run::spec::PreparedRun;
 use crate::sim::engine::Engine;
 use crate::sim::{Boundary, Particles, Scene};
-use crate::view::raster::speed_rgb;
 
 /// Pixels along the longer side of the box.
 const LONG_SIDE_PX: f64 = 800.0;
@@ -86,12 +86,6 @@ fn draw_state(
         .map_err(|e| anyhow!("{e}"))?;
     }
     Ok(())
-}
-
-/// Twice the rms speed: the colour scale's red end (1 for a gas at rest).
-pub fn fast_speed(particles: &Particles) -> f64 {
-    let fast = 2.0 * particles.rms_speed();
-    if fast > 0.0 { fast } else { 1.0 }
 }
 
 /// Writes a PNG of the disks after all the run's steps.

@@ -3,8 +3,8 @@
 
 use ab_glyph::{Font, FontRef, PxScale, ScaleFont, point};
 
+use crate::draw::raster::Frame;
 use crate::report::figures::FONT_BYTES;
-use crate::view::raster::Frame;
 
 /// Rows below the drawing that hold the status line.
 pub const STATUS_ROWS: usize = 20;
@@ -108,8 +108,8 @@ impl StatusFont {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::draw::raster::{View, draw};
     use crate::sim::snapshot::Snapshot;
-    use crate::view::raster::{View, draw};
 
     #[test]
     fn the_status_line_writes_ink_in_the_status_rows_only() {

@@ -20,6 +20,7 @@ use minifb::{Key, KeyRepeat, Window, WindowOptions};
 use serde::Serialize;
 
 use crate::backend::threads::{self, ThreadedStepper};
+use crate::draw::raster::{Drawn, Frame, View, draw, fast_speed};
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::{Method, PreparedRun};
 use crate::sim::Particles;
@@ -27,8 +28,6 @@ use crate::sim::engine::Engine;
 use crate::sim::observe::state_hash;
 use crate::sim::snapshot::Snapshot;
 use crate::system::output::write_atomically;
-use crate::view::raster::{Drawn, Frame, View, draw};
-use crate::view::render::fast_speed;
 use crate::view::status::{STATUS_ROWS, StatusFont};
 
 /// What `collide view` was asked for, validated.

@@ -4,11 +4,10 @@
 //! frames per second the seed's OpenGL window measured (simulation and drawing) beside
 //! its step rate without drawing.
 
-use crate::backend::timed;
+use crate::draw::raster::{Frame, View, draw, fast_speed};
 use crate::sim::snapshot::Snapshot;
 use crate::sim::{Domain, Particles};
-use crate::view::raster::{Frame, View, draw};
-use crate::view::render::fast_speed;
+use crate::system::machine::timed;
 
 /// Pixels of an offscreen frame: `collide view`'s default drawing.
 pub const DRAW_SIZE: (usize, usize) = (800, 800);
@@ -77,8 +76,8 @@ pub fn draw_step(offscreen: &mut Option<Offscreen>, particles: &Particles) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::draw::raster::BACKGROUND;
     use crate::sim::{Boundary, Disk};
-    use crate::view::raster::BACKGROUND;
 
     #[test]
     fn each_draw_fills_the_frame_with_the_disks_and_counts_its_seconds() {

@@ -8,6 +8,7 @@
 //! disks cover (their count times the mean disk area, at most all of it). The splat is
 //! what keeps 10⁶ disks and more readable and fast when the whole box is shown.
 
+use crate::sim::Particles;
 use crate::sim::snapshot::{SPEED_LEVELS, Snapshot};
 
 /// Pixels of margin around the whole box at zoom 1.
@@ -300,6 +301,12 @@ fn outline(view: &View, frame: &mut Frame) {
             }
         }
     }
+}
+
+/// Twice the rms speed: the colour scale's red end (1 for a gas at rest).
+pub fn fast_speed(particles: &Particles) -> f64 {
+    let fast = 2.0 * particles.rms_speed();
+    if fast > 0.0 { fast } else { 1.0 }
 }
 
 #[cfg(test)]
