@@ -211,10 +211,11 @@ fn drawing_with_mpi_is_refused_in_a_manifest_and_on_the_command_line() {
     }
     assert!(!out.join("tiny").exists(), "wrote a results folder");
     let scene = dir.path().join("scene.toml");
+    // `--draw` alone, before the scene: a flag, not a flag taking the scene as its value.
     let simulate = collide(&[
         "simulate",
-        scene.to_str().unwrap(),
         "--draw",
+        scene.to_str().unwrap(),
         "--backend",
         "mpi",
     ]);

@@ -51,22 +51,23 @@ pub struct Measured {
 /// their rates compare even where the machine differs: the median of three runs within
 /// 40 minutes (this VM's speed drifted by up to 35% between them; the observation
 /// rates from the last, the first to time them with the state cold in the caches).
-/// The step method's rates are from one later run of
-/// `cargo bench --bench kernels -- 'step/' --warm-up-time 1 --measurement-time 3` on the
-/// same idle machine (2026-11-23), after the broad phase moved to neighbour lists.
+/// The step method's rates are the median of three later runs of
+/// `cargo bench --bench kernels -- '^step/'` on the same machine, idle
+/// (2026-11-23, 16:55–17:31 UTC; the runs differed by up to 25%), after the move, the
+/// walls and the neighbour lists' escapee marks became one pass over the disks.
 /// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [
-        measured(1e4, 0.05, 94.5e6, 0.947e6, 432e6),
-        measured(1e4, 0.3, 53.0e6, 1.49e6, 457e6),
+        measured(1e4, 0.05, 88.8e6, 0.947e6, 432e6),
+        measured(1e4, 0.3, 48.1e6, 1.49e6, 457e6),
     ],
     [
-        measured(1e5, 0.05, 76.9e6, 0.235e6, 68.0e6),
-        measured(1e5, 0.3, 39.7e6, 0.612e6, 90.6e6),
+        measured(1e5, 0.05, 61.8e6, 0.235e6, 68.0e6),
+        measured(1e5, 0.3, 30.3e6, 0.612e6, 90.6e6),
     ],
     [
-        measured(1e6, 0.05, 51.6e6, 0.190e6, 79.6e6),
-        measured(1e6, 0.3, 23.0e6, 0.456e6, 110e6),
+        measured(1e6, 0.05, 53.5e6, 0.190e6, 79.6e6),
+        measured(1e6, 0.3, 26.5e6, 0.456e6, 110e6),
     ],
 ];
 

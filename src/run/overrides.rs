@@ -181,9 +181,9 @@ overrides! {
     tc: f64,
     /// Draw the whole box offscreen after every step, as `collide view` draws it (800 ×
     /// 800 pixels, no window), timed apart from the stepping loop: the result gains
-    /// `draw_s` and `fps_with_drawing`. `--draw` alone means true; serial and rayon
-    /// backends only.
-    #[arg(long, num_args = 0..=1, default_missing_value = "true")]
+    /// `draw_s` and `fps_with_drawing`. `--draw` alone means true (`--draw=false` sets
+    /// it false); serial and rayon backends only.
+    #[arg(long, num_args = 0..=1, default_missing_value = "true", require_equals = true)]
     draw: bool,
 }
 

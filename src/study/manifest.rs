@@ -104,18 +104,17 @@ impl Configuration {
     /// The `collide simulate` arguments after the scene path.
     pub fn simulate_args(&self) -> Vec<String> {
         let mut args = vec!["--json".to_owned()];
-        let mut push = |flag: &str, value: Option<String>| {
-            if let Some(value) = value {
-                args.push(flag.to_owned());
-                args.push(value);
-            }
-        };
-        for (name, value) in self.overrides.entries() {
-            push(&format!("--{name}"), value);
-        }
-        push("--backend", Some(self.backend.name().to_owned()));
+        // `--name=value`, one argument: a flag that may also stand alone (`--draw`)
+        // takes its value only that way.
+        args.extend(
+            self.overrides
+                .entries()
+                .into_iter()
+                .filter_map(|(name, value)| Some(format!("--{name}={}", value?))),
+        );
+        args.extend(["--backend".to_owned(), self.backend.name().to_owned()]);
         if let Some(flag) = self.backend.workers_flag() {
-            push(flag, Some(self.workers.to_string()));
+            args.extend([flag.to_owned(), self.workers.to_string()]);
         }
         if self.oversubscribe {
             args.push("--oversubscribe".to_owned());
@@ -574,7 +573,7 @@ mod tests {
         let n: Vec<Option<i64>> = weak.configurations.iter().map(|c| c.overrides.n).collect();
         assert_eq!(n, [Some(100), Some(200), Some(400)]);
         let args = weak.configurations[2].simulate_args();
-        assert!(args.windows(2).any(|w| w == ["--n", "400"]), "{args:?}");
+        assert!(args.contains(&"--n=400".to_owned()), "{args:?}");
         assert!(args.windows(2).any(|w| w == ["--threads", "4"]), "{args:?}");
     }
 
@@ -599,10 +598,7 @@ mod tests {
             .find(|c| c.overrides.method == Some(MethodChoice::Fixed(Method::Event)))
             .unwrap();
         let args = event.simulate_args();
-        assert!(
-            args.windows(2).any(|w| w == ["--method", "event"]),
-            "{args:?}"
-        );
+        assert!(args.contains(&"--method=event".to_owned()), "{args:?}");
         assert!(event.key().contains(";method=event"), "{}", event.key());
         // Unswept, the key keeps its old form, so older results resume.
         let plain = study("[backends]\nserial = true\n");
@@ -628,7 +624,7 @@ mod tests {
         assert!(keys[0].ends_with(";method=event;tc=0.0001"), "{keys:?}");
         assert!(keys[1].ends_with(";method=event;tc=0"), "{keys:?}");
         let args = swept.configurations[1].simulate_args();
-        assert!(args.windows(2).any(|w| w == ["--tc", "0"]), "{args:?}");
+        assert!(args.contains(&"--tc=0".to_owned()), "{args:?}");
         // Each configuration's spec carries its tc.
         let spec = load_scene(
             &swept.configurations[1].input,
