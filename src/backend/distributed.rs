@@ -21,6 +21,7 @@ use crate::backend::{
     Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
     summarize, timed,
 };
+use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
 use crate::sim::grid::{Contact, Entry, StripGrid, StripLayout, receive_band, refresh_band};
 use crate::sim::neighbours::{PairList, Skin};
@@ -113,7 +114,7 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         draw_s: None,
     };
     let workers = Workers {
-        backend: "mpi",
+        backend: BackendKind::Mpi,
         threads: 1,
         ranks: comm.size(),
     };

@@ -16,6 +16,7 @@ use std::num::NonZeroUsize;
 use std::ops::ControlFlow;
 use std::time::Instant;
 
+use crate::run::backend_kind::BackendKind;
 use crate::run::spec::{InjectedSlowdown, Method, PreparedRun};
 use crate::run::summary::RunSummary;
 use crate::sim::observe::{Observables, observe, state_hash, thermodynamics};
@@ -133,10 +134,10 @@ fn busy_rounds(rounds: u64) {
     }
 }
 
-/// Where a run's workers went: the backend's name and its threads and ranks.
+/// Where a run's workers went: the backend and its threads and ranks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Workers {
-    pub backend: &'static str,
+    pub backend: BackendKind,
     pub threads: usize,
     pub ranks: usize,
 }
@@ -235,7 +236,7 @@ pub fn summarize(
         steps,
         dt: prepared.params.dt,
         dt_auto_fraction: prepared.dt_auto_fraction,
-        backend: workers.backend.to_owned(),
+        backend: workers.backend.name().to_owned(),
         workers: workers.threads * workers.ranks,
         threads: workers.threads,
         ranks: workers.ranks,

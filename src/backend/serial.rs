@@ -9,6 +9,7 @@ use crate::backend::{
     is_curve_sample, step_loop, summarize, timed,
 };
 use crate::draw::offscreen::{Offscreen, draw_step};
+use crate::run::backend_kind::BackendKind;
 use crate::run::spec::{Method, Observe, PreparedRun, RunSpec};
 use crate::sim::Particles;
 use crate::sim::Stepper;
@@ -116,7 +117,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
         draw_s,
     };
     let workers = Workers {
-        backend: "serial",
+        backend: BackendKind::Serial,
         threads: 1,
         ranks: 1,
     };

@@ -20,6 +20,7 @@ use crate::backend::{
     summarize, timed,
 };
 use crate::draw::offscreen::{Offscreen, draw_step};
+use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
 use crate::sim::collision::DiskState;
 use crate::sim::grid::{
@@ -90,7 +91,7 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
         draw_s,
     };
     let workers = Workers {
-        backend: "rayon",
+        backend: BackendKind::Rayon,
         threads: threads.get(),
         ranks: 1,
     };
