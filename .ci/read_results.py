@@ -25,8 +25,8 @@ missing = [c for c in REQUIRED if c not in table.column_names]
 assert not missing, f"missing columns: {missing}"
 rows = table.to_pylist()
 assert rows and all(r["status"] == "ok" for r in rows), "a run failed"
-# The version the collide that wrote them declares (src/records.rs).
-records_rs = pathlib.Path(__file__).resolve().parent.parent / "src" / "records.rs"
+# The version the collide that wrote them declares (src/study/records.rs).
+records_rs = pathlib.Path(__file__).resolve().parent.parent / "src" / "study" / "records.rs"
 version = int(re.search(r"pub const SCHEMA_VERSION: u32 = (\d+);", records_rs.read_text()).group(1))
 assert all(r["schema_version"] == version for r in rows), f"schema version is not {version}"
 hashes = {}
