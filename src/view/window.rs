@@ -23,10 +23,10 @@ use crate::backend::threads::{self, ThreadedStepper};
 use crate::draw::raster::{Drawn, Frame, View, draw, fast_speed};
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::{Method, PreparedRun};
-use crate::sim::Particles;
 use crate::sim::engine::Engine;
 use crate::sim::observe::state_hash;
 use crate::sim::snapshot::Snapshot;
+use crate::sim::{Domain, Particles};
 use crate::system::output::write_atomically;
 use crate::view::status::{STATUS_ROWS, StatusFont};
 
@@ -245,50 +245,15 @@ pub fn run(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<ViewS
             break Err(err);
         }
         present_s += present_start.elapsed().as_secs_f64();
-        for key in screen.window.get_keys_pressed(KeyRepeat::Yes) {
-            match key {
-                Key::Escape => closing = true,
-                Key::Space => {
-                    controls.paused.fetch_xor(true, Ordering::Relaxed);
-                }
-                Key::Period => {
-                    controls.single_steps.fetch_add(1, Ordering::Relaxed);
-                }
-                Key::RightBracket => {
-                    let spf = controls.steps_per_frame.load(Ordering::Relaxed);
-                    controls
-                        .steps_per_frame
-                        .store((spf * 2).min(1 << 20), Ordering::Relaxed);
-                }
-                Key::LeftBracket => {
-                    let spf = controls.steps_per_frame.load(Ordering::Relaxed);
-                    controls
-                        .steps_per_frame
-                        .store((spf / 2).max(1), Ordering::Relaxed);
-                }
-                Key::Equal | Key::NumPadPlus => view.zoom_by(1.25),
-                Key::Minus | Key::NumPadMinus => view.zoom_by(0.8),
-                Key::Left => view.pan_by(-0.1, 0.0),
-                Key::Right => view.pan_by(0.1, 0.0),
-                Key::Up => view.pan_by(0.0, 0.1),
-                Key::Down => view.pan_by(0.0, -0.1),
-                Key::Key0 => {
-                    view =
-                        View::whole_box(options.width, options.height, domain.width, domain.height);
-                }
-                Key::P => {
-                    screenshots += 1;
-                    let path = options.screenshot.clone().unwrap_or_else(|| {
-                        PathBuf::from(format!("collide-view-{screenshots}.png"))
-                    });
-                    match write_png(&path, &frame) {
-                        Ok(()) => println!("screenshot written to {}", path.display()),
-                        Err(err) => eprintln!("error: {err:#}"),
-                    }
-                }
-                _ => {}
-            }
-        }
+        closing = apply_keys(
+            &screen,
+            &controls,
+            &mut view,
+            options,
+            &domain,
+            &frame,
+            &mut screenshots,
+        );
         if let Some(interval) = frame_interval {
             let wait_start = Instant::now();
             if let Some(rest) = interval.checked_sub(frame_start.elapsed()) {
@@ -297,32 +262,8 @@ pub fn run(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<ViewS
             wait_s += wait_start.elapsed().as_secs_f64();
         }
         frame_s.push(frame_start.elapsed().as_secs_f64());
-        // The status line shows the rates over about the last half second.
-        let steps = current.steps;
-        let seconds = rates.since.elapsed().as_secs_f64();
-        if seconds >= 0.5 || status.is_empty() {
-            let frames = frame_s.len() as u64;
-            rates = Rates {
-                since: Instant::now(),
-                frames,
-                steps,
-                frames_per_s: (frames - rates.frames) as f64 / seconds.max(1e-9),
-                steps_per_s: (steps - rates.steps) as f64 / seconds.max(1e-9),
-            };
-        }
-        let paused = controls.paused.load(Ordering::Relaxed);
-        status = format!(
-            "{:.0} frames/s  {:.0} steps/s  N {}  t {:.3}  E {:.6e}  step {}/{}  {} steps/frame{}",
-            rates.frames_per_s,
-            rates.steps_per_s,
-            n,
-            steps as f64 * dt,
-            current.snapshot.kinetic_energy,
-            steps,
-            total_steps,
-            controls.steps_per_frame.load(Ordering::Relaxed),
-            if paused { "  paused (space)" } else { "" },
-        );
+        rates.update(frame_s.len() as u64, current.steps, status.is_empty());
+        status = status_line(&rates, current, &controls, n, dt, total_steps);
     };
     controls.quit.store(true, Ordering::Relaxed);
     drop(empty_tx);
@@ -335,11 +276,50 @@ pub fn run(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<ViewS
     if let Some(path) = &options.screenshot {
         write_png(path, &frame)?;
     }
+    let times = FrameTimes {
+        frame_s,
+        draw_s,
+        present_s,
+        wait_s,
+    };
+    let stats = view_stats(times, &stepped, session_s, drawn_as, dt, options);
+    if let Some(path) = &options.stats {
+        let text = serde_json::to_string_pretty(&stats)?;
+        write_atomically(path, |out| writeln!(out, "{text}"))?;
+    }
+    Ok(stats)
+}
+
+/// Where the frames' time went: each frame's, and the sums of its parts.
+struct FrameTimes {
+    frame_s: Vec<f64>,
+    draw_s: f64,
+    present_s: f64,
+    wait_s: f64,
+}
+
+/// The `--stats` of a session of `session_s` seconds, steps of `dt`, that ended with
+/// `stepped`.
+fn view_stats(
+    times: FrameTimes,
+    stepped: &Stepped,
+    session_s: f64,
+    drawn_as: Drawn,
+    dt: f64,
+    options: &ViewOptions,
+) -> ViewStats {
+    let FrameTimes {
+        mut frame_s,
+        draw_s,
+        present_s,
+        wait_s,
+    } = times;
+    let n = stepped.particles.len();
     let display = std::env::var("DISPLAY").unwrap_or_default();
     let frames = frame_s.len() as u64;
     let per_frame = |seconds: f64| 1e3 * seconds / frames.max(1) as f64;
     let frames_s: f64 = frame_s.iter().sum();
-    let stats = ViewStats {
+    ViewStats {
         frames,
         frames_per_s: frames as f64 / frames_s,
         snapshots: stepped.snapshots,
@@ -368,12 +348,107 @@ pub fn run(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<ViewS
         frame_cap_per_s: options.max_fps,
         virtual_display: is_virtual(&display),
         display,
-    };
-    if let Some(path) = &options.stats {
-        let text = serde_json::to_string_pretty(&stats)?;
-        write_atomically(path, |out| writeln!(out, "{text}"))?;
     }
-    Ok(stats)
+}
+
+/// Acts on the keys pressed since the last frame: pause, single step, steps per frame,
+/// zoom, pan, whole box, screenshot. Returns whether Escape asked to close.
+fn apply_keys(
+    screen: &Screen,
+    controls: &Controls,
+    view: &mut View,
+    options: &ViewOptions,
+    domain: &Domain,
+    frame: &Frame,
+    screenshots: &mut u32,
+) -> bool {
+    let mut closing = false;
+    for key in screen.window.get_keys_pressed(KeyRepeat::Yes) {
+        match key {
+            Key::Escape => closing = true,
+            Key::Space => {
+                controls.paused.fetch_xor(true, Ordering::Relaxed);
+            }
+            Key::Period => {
+                controls.single_steps.fetch_add(1, Ordering::Relaxed);
+            }
+            Key::RightBracket => {
+                let spf = controls.steps_per_frame.load(Ordering::Relaxed);
+                controls
+                    .steps_per_frame
+                    .store((spf * 2).min(1 << 20), Ordering::Relaxed);
+            }
+            Key::LeftBracket => {
+                let spf = controls.steps_per_frame.load(Ordering::Relaxed);
+                controls
+                    .steps_per_frame
+                    .store((spf / 2).max(1), Ordering::Relaxed);
+            }
+            Key::Equal | Key::NumPadPlus => view.zoom_by(1.25),
+            Key::Minus | Key::NumPadMinus => view.zoom_by(0.8),
+            Key::Left => view.pan_by(-0.1, 0.0),
+            Key::Right => view.pan_by(0.1, 0.0),
+            Key::Up => view.pan_by(0.0, 0.1),
+            Key::Down => view.pan_by(0.0, -0.1),
+            Key::Key0 => {
+                *view = View::whole_box(options.width, options.height, domain.width, domain.height);
+            }
+            Key::P => {
+                *screenshots += 1;
+                let path = options
+                    .screenshot
+                    .clone()
+                    .unwrap_or_else(|| PathBuf::from(format!("collide-view-{screenshots}.png")));
+                match write_png(&path, frame) {
+                    Ok(()) => println!("screenshot written to {}", path.display()),
+                    Err(err) => eprintln!("error: {err:#}"),
+                }
+            }
+            _ => {}
+        }
+    }
+    closing
+}
+
+impl Rates {
+    /// Rates from the frames and steps since the last update, at most every half
+    /// second (or at once, when `now` asks for a first status line).
+    fn update(&mut self, frames: u64, steps: u64, now: bool) {
+        let seconds = self.since.elapsed().as_secs_f64();
+        if seconds >= 0.5 || now {
+            *self = Rates {
+                since: Instant::now(),
+                frames,
+                steps,
+                frames_per_s: (frames - self.frames) as f64 / seconds.max(1e-9),
+                steps_per_s: (steps - self.steps) as f64 / seconds.max(1e-9),
+            };
+        }
+    }
+}
+
+/// The status line under the box: the two rates, the run, and the controls' state.
+fn status_line(
+    rates: &Rates,
+    current: &Shown,
+    controls: &Controls,
+    n: usize,
+    dt: f64,
+    total_steps: u64,
+) -> String {
+    let paused = controls.paused.load(Ordering::Relaxed);
+    format!(
+        "{:.0} frames/s  {:.0} steps/s  N {}  t {:.3}  E {:.6e}  step {}/{}  {} steps/frame{}",
+        rates.frames_per_s,
+        rates.steps_per_s,
+        n,
+        current.steps as f64 * dt,
+        current.snapshot.kinetic_energy,
+        current.steps,
+        total_steps,
+        controls.steps_per_frame.load(Ordering::Relaxed),
+        if paused { "  paused (space)" } else { "" },
+    )
 }
 
 /// The engine the simulation thread steps: the serial reference, or the rayon stepper
