@@ -183,13 +183,9 @@ pub fn load(path: &Path) -> anyhow::Result<(Study, String)> {
 /// Validates manifest text for `machine` (every configuration's workers and memory must
 /// fit it); scene files are found relative to `path`'s folder.
 pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, ManifestError> {
-    let at = |offset: usize| format!("{}:{}", path.display(), line_of(text, offset));
-    let invalid = |offset: usize, message: String| ManifestError::Invalid {
-        location: at(offset),
-        message,
-    };
+    let at = Locator { path, text };
     let raw: RawManifest = toml::from_str(text).map_err(|err| {
-        invalid(
+        at.invalid(
             err.span().map_or(0, |span| span.start),
             format!(
                 "{}; see docs/guide.md, Experiment manifests, for the keys a manifest accepts",
@@ -199,12 +195,12 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
     })?;
     let name = raw.name.get_ref().trim().to_owned();
     check_name(&name)
-        .map_err(|reason| invalid(raw.name.span().start, format!("`name` {reason}")))?;
+        .map_err(|reason| at.invalid(raw.name.span().start, format!("`name` {reason}")))?;
     let count = |value: &Option<Spanned<i64>>, field: &str, default: i64, min: i64| {
         let v = value.as_ref().map_or(default, |v| *v.get_ref());
         if v < min {
             let offset = value.as_ref().map_or(0, |v| v.span().start);
-            return Err(invalid(
+            return Err(at.invalid(
                 offset,
                 format!("`{field}` is {v}; give a whole number of at least {min}"),
             ));
@@ -216,7 +212,7 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
     let timeout_s = raw.timeout_s.as_ref().map_or(600.0, |t| *t.get_ref());
     if !(timeout_s > 0.0 && timeout_s.is_finite()) {
         let offset = raw.timeout_s.as_ref().map_or(0, |t| t.span().start);
-        return Err(invalid(
+        return Err(at.invalid(
             offset,
             format!("`timeout_s` is {timeout_s}; give a positive number of seconds"),
         ));
@@ -225,78 +221,83 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
         .scaling
         .as_ref()
         .map_or(Scaling::Strong, |s| *s.get_ref());
+    let configurations = configurations(&at, &raw, scaling, machine)?;
+    Ok(Study {
+        name,
+        description: raw.description,
+        manifest: path.to_owned(),
+        repetitions,
+        warmups,
+        timeout: Duration::from_secs_f64(timeout_s),
+        scaling,
+        configurations,
+    })
+}
 
+/// Where a manifest's errors point: its path, and the line of an offset in its text.
+struct Locator<'a> {
+    path: &'a Path,
+    text: &'a str,
+}
+
+impl Locator<'_> {
+    /// The error `message` at the line of `offset`.
+    fn invalid(&self, offset: usize, message: String) -> ManifestError {
+        ManifestError::Invalid {
+            location: format!("{}:{}", self.path.display(), line_of(self.text, offset)),
+            message,
+        }
+    }
+}
+
+/// Every configuration of the manifest: each scene × sweep point × (backend, workers),
+/// in that order, each checked as `collide simulate` would check it, none twice.
+fn configurations(
+    at: &Locator,
+    raw: &RawManifest,
+    scaling: Scaling,
+    machine: &Machine,
+) -> Result<Vec<Configuration>, ManifestError> {
     let backends = backend_list(raw.backends.get_ref(), machine)
-        .map_err(|message| invalid(raw.backends.span().start, message))?;
-    let points = sweep_points(&raw.sweep).map_err(|(offset, message)| invalid(offset, message))?;
+        .map_err(|message| at.invalid(raw.backends.span().start, message))?;
+    let points =
+        sweep_points(&raw.sweep).map_err(|(offset, message)| at.invalid(offset, message))?;
     if raw.scenes.get_ref().is_empty() {
-        return Err(invalid(
+        return Err(at.invalid(
             raw.scenes.span().start,
             "`scenes` is empty; add a [[scenes]] entry with `file = ...` or inline tables".into(),
         ));
     }
-    let folder = path.parent().unwrap_or(Path::new("."));
+    let folder = at.path.parent().unwrap_or(Path::new("."));
     let mut configurations = Vec::new();
     let mut seen = BTreeSet::new();
     for entry in raw.scenes.get_ref() {
         let offset = entry.span().start;
         if let Some(name) = &entry.get_ref().name {
-            check_name(name.get_ref())
-                .map_err(|reason| invalid(name.span().start, format!("`scenes.name` {reason}")))?;
+            check_name(name.get_ref()).map_err(|reason| {
+                at.invalid(name.span().start, format!("`scenes.name` {reason}"))
+            })?;
         }
         let (scene, input) =
-            scene_input(entry.get_ref(), folder).map_err(|message| invalid(offset, message))?;
+            scene_input(entry.get_ref(), folder).map_err(|message| at.invalid(offset, message))?;
         for point in &points {
             for &(backend, workers) in &backends {
                 let mut overrides = point.clone();
                 if scaling == Scaling::Weak {
                     let base = per_worker_n(&input, &overrides).map_err(|message| {
-                        invalid(offset, format!("scene `{scene}`: {message}"))
+                        at.invalid(offset, format!("scene `{scene}`: {message}"))
                     })?;
                     overrides.n = Some(base * workers as i64);
                 }
-                // Every configuration is a valid scene: the same checks as `collide simulate`.
-                let in_scene = |message: String| {
-                    invalid(
-                        offset,
-                        format!("scene `{scene}` with {}: {message}", describe(&overrides)),
-                    )
-                };
-                let spec = load_scene(&input, &overrides).map_err(in_scene)?;
-                // Every rank of an MPI run builds all the disks.
-                let copies = if backend == BackendKind::Mpi {
-                    workers
-                } else {
-                    1
-                };
-                let footprint = spec.footprint(copies);
-                check_memory(&footprint, machine).map_err(in_scene)?;
-                // What the backend cannot run, at the swept key that asks for it (else at
-                // `backends`).
-                let refuse = |swept: Option<usize>, does: &str, fix: &str| {
-                    invalid(
-                        swept.unwrap_or(raw.backends.span().start),
-                        format!(
-                            "scene `{scene}` with {} {does}, but `backends` also lists {}; {fix}",
-                            describe(&overrides),
-                            backend_label(backend)
-                        ),
-                    )
-                };
-                if spec.method.method.may_be_event() && backend != BackendKind::Serial {
-                    return Err(refuse(
-                        raw.sweep.method.as_ref().map(|m| m.span().start),
-                        "runs the event method, which runs on the serial backend only",
-                        "run the event method in a study with only `serial = true` (or sweep `method` over [\"step\"] here)",
-                    ));
-                }
-                if spec.method.draw && backend == BackendKind::Mpi {
-                    return Err(refuse(
-                        raw.sweep.draw.as_ref().map(|d| d.span().start),
-                        "draws every step, which needs all the disks in one process",
-                        "draw in a study of `serial` and `rayon` only (or sweep `draw` over [false] here)",
-                    ));
-                }
+                let footprint = checked(
+                    at,
+                    raw,
+                    offset,
+                    (&scene, &input),
+                    &overrides,
+                    (backend, workers),
+                    machine,
+                )?;
                 let configuration = Configuration {
                     scene: scene.clone(),
                     input: input.clone(),
@@ -307,7 +308,7 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
                     footprint,
                 };
                 if !seen.insert(configuration.key()) {
-                    return Err(invalid(
+                    return Err(at.invalid(
                         offset,
                         format!(
                             "the configuration {} appears twice; remove the repeated scene, sweep value or worker count",
@@ -319,16 +320,63 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
             }
         }
     }
-    Ok(Study {
-        name,
-        description: raw.description,
-        manifest: path.to_owned(),
-        repetitions,
-        warmups,
-        timeout: Duration::from_secs_f64(timeout_s),
-        scaling,
-        configurations,
-    })
+    Ok(configurations)
+}
+
+/// The memory footprint of `scene` (its `input`) with `overrides` on `backend` and
+/// `workers`, once it is a valid scene (the same checks as `collide simulate`) that fits
+/// the machine and that the backend can run; errors point at its scene entry (`offset`)
+/// or at the swept key that asks for what the backend cannot do.
+fn checked(
+    at: &Locator,
+    raw: &RawManifest,
+    offset: usize,
+    (scene, input): (&str, &SceneInput),
+    overrides: &Overrides,
+    (backend, workers): (BackendKind, usize),
+    machine: &Machine,
+) -> Result<Footprint, ManifestError> {
+    let in_scene = |message: String| {
+        at.invalid(
+            offset,
+            format!("scene `{scene}` with {}: {message}", describe(overrides)),
+        )
+    };
+    let spec = load_scene(input, overrides).map_err(in_scene)?;
+    // Every rank of an MPI run builds all the disks.
+    let copies = if backend == BackendKind::Mpi {
+        workers
+    } else {
+        1
+    };
+    let footprint = spec.footprint(copies);
+    check_memory(&footprint, machine).map_err(in_scene)?;
+    // What the backend cannot run, at the swept key that asks for it (else at `backends`).
+    let refuse = |swept: Option<usize>, does: &str, fix: &str| {
+        at.invalid(
+            swept.unwrap_or(raw.backends.span().start),
+            format!(
+                "scene `{scene}` with {} {does}, but `backends` also lists {}; {fix}",
+                describe(overrides),
+                backend_label(backend)
+            ),
+        )
+    };
+    if spec.method.method.may_be_event() && backend != BackendKind::Serial {
+        return Err(refuse(
+            raw.sweep.method.as_ref().map(|m| m.span().start),
+            "runs the event method, which runs on the serial backend only",
+            "run the event method in a study with only `serial = true` (or sweep `method` over [\"step\"] here)",
+        ));
+    }
+    if spec.method.draw && backend == BackendKind::Mpi {
+        return Err(refuse(
+            raw.sweep.draw.as_ref().map(|d| d.span().start),
+            "draws every step, which needs all the disks in one process",
+            "draw in a study of `serial` and `rayon` only (or sweep `draw` over [false] here)",
+        ));
+    }
+    Ok(footprint)
 }
 
 /// (backend, workers) pairs, in manifest order, each within the worker ceiling of
