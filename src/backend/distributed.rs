@@ -24,7 +24,7 @@ use crate::backend::{
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
 use crate::sim::grid::{Contact, Entry, StripGrid, StripLayout, receive_band, refresh_band};
-use crate::sim::neighbours::{PairList, Skin};
+use crate::sim::neighbours::{PairList, Skin, larger};
 use crate::sim::observe::observe;
 use crate::sim::particles::PACKED_LEN;
 use crate::sim::resolve::resolve_contacts;
@@ -274,7 +274,7 @@ impl RankState {
             comm.all_gather(&[moved_sq])
                 .iter()
                 .flatten()
-                .fold(0.0, |a: f64, &b| if a >= b || a.is_nan() { a } else { b })
+                .fold(0.0, |a, &b| larger(a, b))
         });
         let rebuild = self.skin.is_exceeded(moved_sq);
         if rebuild {

@@ -201,8 +201,8 @@ fn splat(snapshot: &Snapshot, view: &View, frame: &mut Frame) {
         frame.speed_sum.clear();
         frame.speed_sum.resize(n_pixels, 0);
     }
-    // Only the pixels a disk lands on are blended and cleared again: in a dilute gas of
-    // 10⁵ disks that is a sixth of an 800 × 800 frame, not all of it.
+    // Only the pixels a disk lands on are blended and cleared again: for 10⁵ disks at
+    // most 10⁵ of the 640,000 pixels of an 800 × 800 frame, not all of them.
     frame.touched.clear();
     let Transform { scale, offset } = Transform::of(view);
     let (w, h) = (width as f32, height as f32);

@@ -829,8 +829,8 @@ impl Validator<'_> {
     }
 }
 
-/// 1-based line number of a byte offset.
-fn line_of(text: &str, offset: usize) -> usize {
+/// 1-based line number of a byte offset (scene files and manifests alike).
+pub fn line_of(text: &str, offset: usize) -> usize {
     text[..offset.min(text.len())]
         .bytes()
         .filter(|&b| b == b'\n')

@@ -244,7 +244,11 @@ impl Locator<'_> {
     /// The error `message` at the line of `offset`.
     fn invalid(&self, offset: usize, message: String) -> ManifestError {
         ManifestError::Invalid {
-            location: format!("{}:{}", self.path.display(), line_of(self.text, offset)),
+            location: format!(
+                "{}:{}",
+                self.path.display(),
+                scene_file::line_of(self.text, offset)
+            ),
             message,
         }
     }
@@ -553,10 +557,6 @@ fn describe(o: &Overrides) -> String {
     } else {
         parts.join(", ")
     }
-}
-
-fn line_of(text: &str, offset: usize) -> usize {
-    text[..offset.min(text.len())].matches('\n').count() + 1
 }
 
 #[cfg(test)]
