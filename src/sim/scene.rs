@@ -493,43 +493,77 @@ const EMPTY_CELL: PlacementCell = PlacementCell {
 /// listed in those cells are fetched half as far ahead, once the cells have arrived.
 const PREFETCH_TRIES_AHEAD: usize = 16;
 
+/// One random try at placing a disk: where it lands and the 3×3 block of cells that
+/// says whether it is free.
+#[derive(Clone, Copy)]
+struct Try {
+    x: f64,
+    y: f64,
+    rows: Lines,
+    cols: Lines,
+}
+
+impl Try {
+    fn at(x: f64, y: f64, grid: &PlacementGrid) -> Try {
+        let (rows, cols) = grid.block(x, y);
+        Try { x, y, rows, cols }
+    }
+}
+
 /// A copy of the placement generator running [`PREFETCH_TRIES_AHEAD`] tries ahead, with
-/// the tries it drew since.
+/// the tries it drew since and the generator's state before each.
+///
+/// With equal disks every try lands within the same bounds, so placement takes its
+/// tries from here ([`Lookahead::next`]) and draws nothing itself; with unequal disks
+/// the bounds depend on the disk, and the tries here only guide the prefetches.
 struct Lookahead {
     rng: Xoshiro256PlusPlus,
     /// Where tries land: the bounds of the largest disk.
     bounds: (f64, f64, f64, f64),
-    upcoming: [(f64, f64); PREFETCH_TRIES_AHEAD],
-    newest: usize,
+    upcoming: [(Try, Xoshiro256PlusPlus); PREFETCH_TRIES_AHEAD],
+    /// The slot of the oldest try, the next one [`Lookahead::next`] hands out.
+    oldest: usize,
 }
 
 impl Lookahead {
     fn new(rng: &Xoshiro256PlusPlus, bounds: (f64, f64, f64, f64), grid: &PlacementGrid) -> Self {
+        let nowhere = Try::at(f64::NAN, f64::NAN, grid);
         let mut lookahead = Lookahead {
             rng: rng.clone(),
             bounds,
-            upcoming: [(f64::NAN, f64::NAN); PREFETCH_TRIES_AHEAD],
-            newest: 0,
+            upcoming: std::array::from_fn(|_| (nowhere, rng.clone())),
+            oldest: 0,
         };
         for _ in 0..PREFETCH_TRIES_AHEAD {
-            lookahead.advance(grid);
+            lookahead.next(grid);
         }
         lookahead
     }
 
-    /// Draws one more try: prefetches its cells, and the further disks listed in the
-    /// cells of the try half as far ahead.
-    fn advance(&mut self, grid: &PlacementGrid) {
+    /// Hands out the oldest try and draws one more in its place: prefetches the new
+    /// try's cells, and the further disks listed in the cells of the try half as far
+    /// ahead.
+    fn next(&mut self, grid: &PlacementGrid) -> Try {
         let (lo_x, hi_x, lo_y, hi_y) = self.bounds;
+        let before = self.rng.clone();
         let x = uniform_in(&mut self.rng, lo_x, hi_x);
         let y = uniform_in(&mut self.rng, lo_y, hi_y);
-        grid.prefetch_block(x, y);
-        self.newest = (self.newest + 1) % PREFETCH_TRIES_AHEAD;
-        self.upcoming[self.newest] = (x, y);
-        let (x, y) = self.upcoming[(self.newest + PREFETCH_TRIES_AHEAD / 2) % PREFETCH_TRIES_AHEAD];
-        if !x.is_nan() {
-            grid.prefetch_listed(x, y);
+        let new = Try::at(x, y, grid);
+        grid.prefetch_block(&new);
+        let (oldest, _) = std::mem::replace(&mut self.upcoming[self.oldest], (new, before));
+        self.oldest = (self.oldest + 1) % PREFETCH_TRIES_AHEAD;
+        let halfway =
+            &self.upcoming[(self.oldest + PREFETCH_TRIES_AHEAD / 2) % PREFETCH_TRIES_AHEAD].0;
+        if !halfway.x.is_nan() {
+            grid.prefetch_listed(halfway);
         }
+        oldest
+    }
+
+    /// The generator as it would be had placement drawn every try it took itself: its
+    /// state before the oldest try not handed out.
+    fn into_generator(self) -> Xoshiro256PlusPlus {
+        self.upcoming[self.oldest].1.clone()
     }
 }
 
@@ -583,22 +617,20 @@ impl PlacementGrid {
         (rows, cols)
     }
 
-    /// Asks the memory system for the 3×3 block of cells around (x, y).
-    fn prefetch_block(&self, x: f64, y: f64) {
-        let (rows, cols) = self.block(x, y);
-        for &row in rows.as_slice() {
-            for &col in cols.as_slice() {
+    /// Asks the memory system for the 3×3 block of cells of a try.
+    fn prefetch_block(&self, tried: &Try) {
+        for &row in tried.rows.as_slice() {
+            for &col in tried.cols.as_slice() {
                 prefetch(&self.cells[row * self.n_cols + col]);
             }
         }
     }
 
     /// Asks the memory system for the first further disk listed in each cell of the
-    /// 3×3 block around (x, y).
-    fn prefetch_listed(&self, x: f64, y: f64) {
-        let (rows, cols) = self.block(x, y);
-        for &row in rows.as_slice() {
-            for &col in cols.as_slice() {
+    /// 3×3 block of a try.
+    fn prefetch_listed(&self, tried: &Try) {
+        for &row in tried.rows.as_slice() {
+            for &col in tried.cols.as_slice() {
                 let other = self.cells[row * self.n_cols + col].more;
                 if other != NO_DISK {
                     prefetch(&self.positions[other as usize]);
@@ -608,16 +640,15 @@ impl PlacementGrid {
         }
     }
 
-    /// Whether a disk of radius `r` at (x, y) overlaps no disk placed so far.
-    fn is_free(&self, domain: &Domain, radii: &Radii, x: f64, y: f64, r: f64) -> bool {
+    /// Whether a disk of radius `r` at a try overlaps no disk placed so far.
+    fn is_free(&self, domain: &Domain, radii: &Radii, tried: &Try, r: f64) -> bool {
         let overlaps = |ox: f64, oy: f64, other_r: f64| {
-            let (sx, sy) = domain.separation(x, y, ox, oy);
+            let (sx, sy) = domain.separation(tried.x, tried.y, ox, oy);
             let contact = r + other_r;
             sx * sx + sy * sy < contact * contact
         };
-        let (rows, cols) = self.block(x, y);
-        for &row in rows.as_slice() {
-            for &col in cols.as_slice() {
+        for &row in tried.rows.as_slice() {
+            for &col in tried.cols.as_slice() {
                 let cell = &self.cells[row * self.n_cols + col];
                 if overlaps(cell.x, cell.y, cell.radius) {
                     return false;
@@ -715,7 +746,8 @@ fn placement_bounds(domain: &Domain, r: f64) -> (f64, f64, f64, f64) {
 /// with equal disks try k lands where it lands whatever the earlier tries did. So a copy
 /// of the generator runs [`PREFETCH_TRIES_AHEAD`] tries ahead and prefetches the cells
 /// they will read (with unequal disks it uses the largest radius's bounds: a prefetch
-/// only needs to be about right). The generator itself is drawn exactly as without it.
+/// only needs to be about right). The generator ends as if placement had drawn every
+/// try itself.
 fn place_random(
     domain: &Domain,
     radii: &Radii,
@@ -727,11 +759,12 @@ fn place_random(
         .fold(0.0, f64::max);
     let mut grid = PlacementGrid::new(domain, max_radius, n_particles);
     let mut lookahead = Lookahead::new(rng, placement_bounds(domain, max_radius), &grid);
+    let equal = matches!(radii, Radii::Fixed(_));
     for idx in 0..n_particles {
         let r = radii.of(idx);
         let (lo_x, hi_x, lo_y, hi_y) = placement_bounds(domain, r);
         let mut tries = 0;
-        let (x, y) = loop {
+        let tried = loop {
             if tries == MAX_TRIES_PER_DISK || lo_x > hi_x || lo_y > hi_y {
                 return Err(PlacementError::Jammed {
                     placed: idx,
@@ -740,14 +773,23 @@ fn place_random(
                 });
             }
             tries += 1;
-            lookahead.advance(&grid);
-            let x = uniform_in(rng, lo_x, hi_x);
-            let y = uniform_in(rng, lo_y, hi_y);
-            if grid.is_free(domain, radii, x, y, r) {
-                break (x, y);
+            let ahead = lookahead.next(&grid);
+            let tried = match equal {
+                true => ahead,
+                false => {
+                    let x = uniform_in(rng, lo_x, hi_x);
+                    let y = uniform_in(rng, lo_y, hi_y);
+                    Try::at(x, y, &grid)
+                }
+            };
+            if grid.is_free(domain, radii, &tried, r) {
+                break tried;
             }
         };
-        grid.insert(x, y, r);
+        grid.insert(tried.x, tried.y, r);
+    }
+    if equal {
+        *rng = lookahead.into_generator();
     }
     Ok(grid.positions)
 }
