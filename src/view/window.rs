@@ -16,7 +16,7 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use minifb::{Key, KeyRepeat, Window, WindowOptions};
+use minifb::{Key, KeyRepeat, ScaleMode, Window, WindowOptions};
 use serde::Serialize;
 
 use crate::backend::threads::{self, ThreadedStepper};
@@ -145,7 +145,13 @@ impl Screen {
         if std::env::var_os("DISPLAY").is_none_or(|display| display.is_empty()) {
             bail!("no display to open a window on (DISPLAY is not set); {instead}");
         }
-        let mut window = Window::new(title, width, height, WindowOptions::default())
+        // The frame is exactly the window's size: copied row by row, never resampled
+        // (minifb's default, stretching, resamples every pixel of every frame).
+        let options = WindowOptions {
+            scale_mode: ScaleMode::UpperLeft,
+            ..WindowOptions::default()
+        };
+        let mut window = Window::new(title, width, height, options)
             .map_err(|err| anyhow::anyhow!("cannot open a window ({err}); {instead}"))?;
         // Frames are paced by the view itself (see `--max-fps`), not by minifb.
         window.set_target_fps(0);
