@@ -4,5 +4,6 @@
 //! differently from `collide simulate`.
 
 pub mod render;
+pub mod shm;
 pub mod status;
 pub mod window;

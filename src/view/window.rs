@@ -28,6 +28,7 @@ use crate::sim::observe::state_hash;
 use crate::sim::snapshot::Snapshot;
 use crate::sim::{Domain, Particles};
 use crate::system::output::write_atomically;
+use crate::view::shm::SharedFrame;
 use crate::view::status::{STATUS_ROWS, StatusFont};
 
 /// What `collide view` was asked for, validated.
@@ -74,9 +75,12 @@ pub struct ViewStats {
     pub snapshot_ms_mean: f64,
     /// Mean milliseconds per frame drawing (the disks and the status line).
     pub draw_ms_mean: f64,
-    /// Mean milliseconds per frame handing the pixels to the window (XPutImage) and
-    /// reading its input.
+    /// Mean milliseconds per frame handing the pixels to the window and reading its
+    /// input.
     pub present_ms_mean: f64,
+    /// How frames reach the X server: through shared memory (MIT-SHM) or its socket
+    /// (XPutImage).
+    pub shared_memory: bool,
     /// Mean milliseconds per frame spent waiting for the frame cap.
     pub wait_ms_mean: f64,
     /// Mean milliseconds per step (simulation thread).
@@ -134,6 +138,9 @@ struct Stepped {
 /// A window of `width` × `height` pixels that shows frames.
 pub struct Screen {
     window: Window,
+    /// Memory shared with the X server, where it offers it: frames go through it
+    /// instead of the server's socket.
+    shared: Option<SharedFrame>,
 }
 
 impl Screen {
@@ -155,14 +162,28 @@ impl Screen {
             .map_err(|err| anyhow::anyhow!("cannot open a window ({err}); {instead}"))?;
         // Frames are paced by the view itself (see `--max-fps`), not by minifb.
         window.set_target_fps(0);
-        Ok(Screen { window })
+        let shared = SharedFrame::open(window.get_window_handle() as usize as u32, width, height);
+        Ok(Screen { window, shared })
     }
 
     /// Shows the frame (box and status rows) and reads the window's input.
     pub fn present(&mut self, frame: &Frame) -> anyhow::Result<()> {
-        self.window
-            .update_with_buffer(&frame.pixels, frame.width, frame.height + frame.status_rows)
-            .map_err(|err| anyhow::anyhow!("cannot draw in the window: {err}"))
+        match &mut self.shared {
+            Some(shared) => {
+                shared.present(&frame.pixels)?;
+                self.window.update();
+                Ok(())
+            }
+            None => self
+                .window
+                .update_with_buffer(&frame.pixels, frame.width, frame.height + frame.status_rows)
+                .map_err(|err| anyhow::anyhow!("cannot draw in the window: {err}")),
+        }
+    }
+
+    /// Whether frames go through memory shared with the X server (else its socket).
+    pub fn shares_memory(&self) -> bool {
+        self.shared.is_some()
     }
 
     /// The X11 window id (for reading the window back in tests).
@@ -287,6 +308,7 @@ pub fn run(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<ViewS
         draw_s,
         present_s,
         wait_s,
+        shared_memory: screen.shares_memory(),
     };
     let stats = view_stats(times, &stepped, session_s, drawn_as, dt, options);
     if let Some(path) = &options.stats {
@@ -296,12 +318,14 @@ pub fn run(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<ViewS
     Ok(stats)
 }
 
-/// Where the frames' time went: each frame's, and the sums of its parts.
+/// Where the frames' time went: each frame's, and the sums of its parts; and whether
+/// presenting went through shared memory.
 struct FrameTimes {
     frame_s: Vec<f64>,
     draw_s: f64,
     present_s: f64,
     wait_s: f64,
+    shared_memory: bool,
 }
 
 /// The `--stats` of a session of `session_s` seconds, steps of `dt`, that ended with
@@ -319,6 +343,7 @@ fn view_stats(
         draw_s,
         present_s,
         wait_s,
+        shared_memory,
     } = times;
     let n = stepped.particles.len();
     let display = std::env::var("DISPLAY").unwrap_or_default();
@@ -338,6 +363,7 @@ fn view_stats(
         snapshot_ms_mean: 1e3 * stepped.snapshot_s / stepped.snapshots.max(1) as f64,
         draw_ms_mean: per_frame(draw_s),
         present_ms_mean: per_frame(present_s),
+        shared_memory,
         wait_ms_mean: per_frame(wait_s),
         step_ms_mean: 1e3 * stepped.step_s / stepped.steps.max(1) as f64,
         drawn_as: drawn_as.name(),
