@@ -22,7 +22,7 @@ use crate::run::spec::InjectedSlowdown;
 #[cfg(feature = "mpi")]
 use crate::run::summary::RunSummary;
 use crate::study::records::{self, Record, STATUS_OK};
-use crate::study::runner::{Calibration, RunOptions};
+use crate::study::runner::{Calibration, RunOptions, Slowdown};
 use crate::study::{manifest, runner};
 use crate::system::output::{check_output_file, write_atomically, write_state_csv};
 use crate::view::render;
@@ -69,7 +69,12 @@ fn run_check(args: &CheckArgs) -> anyhow::Result<Outcome> {
         update_baseline: args.update_baseline,
         out: args.out.clone(),
         noise: args.noise,
-        inject_slowdown: args.inject_slowdown,
+        slowdown: Slowdown {
+            fraction: args.inject_slowdown,
+            into: args.inject_into,
+        },
+        against: args.against.clone(),
+        history: (!args.no_history && !args.update_baseline).then(|| args.history.clone()),
         quiet: args.quiet,
     };
     Ok(match check::run(&options)? {
@@ -241,7 +246,7 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
         out: args.out.clone(),
         resume: args.resume,
         quiet: args.quiet,
-        simulate_args: Vec::new(),
+        programs: vec![runner::Program::this()?],
         calibrate: false,
     };
     let outcome = runner::run_study(&study, &text, &options)?;
