@@ -717,66 +717,115 @@ fn count_instructions(
 }
 
 /// The instructions `program` executes for `command` (its `collide` arguments) under
-/// callgrind: the process's, or for MPI rank 0's of `ranks` started by `mpirun`, each
-/// under its own callgrind (`log_dir` keeps their logs).
+/// callgrind: the whole process's for serial and rayon; for MPI, rank 0's (of `ranks`
+/// started by `mpirun`, each under its own callgrind, files in `work_dir`) in collide's
+/// own code only, because the MPI library polls for messages while a rank waits, a
+/// count that varied by ±25% from run to run.
 fn callgrind(
     program: &Program,
     command: &[String],
     kind: BackendKind,
     ranks: usize,
-    log_dir: &Path,
+    work_dir: &Path,
 ) -> anyhow::Result<u64> {
-    let callgrind = ["--tool=callgrind", "--callgrind-out-file=/dev/null"];
     let slowdown = program.slowdown.simulate_args(kind);
-    let (out, log) = match kind {
+    let (out, counted) = match kind {
         BackendKind::Mpi => {
-            let log = log_dir.join("callgrind-rank");
-            let mut mpirun = Command::new("mpirun");
-            mpirun
-                .args(["-n", &ranks.to_string(), "valgrind"])
-                .args(callgrind)
+            let files = work_dir.join("callgrind");
+            let rank = "%q{OMPI_COMM_WORLD_RANK}";
+            let out = Command::new("mpirun")
+                .args(["-n", &ranks.to_string(), "valgrind", "--tool=callgrind"])
                 .arg(format!(
-                    "--log-file={}.%q{{OMPI_COMM_WORLD_RANK}}",
-                    log.display()
+                    "--callgrind-out-file={}.out.{rank}",
+                    files.display()
                 ))
+                .arg(format!("--log-file={}.log.{rank}", files.display()))
                 .arg(&program.exe)
                 .args(command)
                 .args(&slowdown)
                 // OpenMPI refuses root without these; harmless otherwise.
                 .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-                .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1");
-            let out = mpirun.output().context("cannot run mpirun")?;
-            let rank0 = std::fs::read_to_string(log.with_extension("0")).unwrap_or_default();
-            (out, rank0)
+                .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+                .output()
+                .context("cannot run mpirun")?;
+            let exe = std::fs::canonicalize(&program.exe)?;
+            let counted = std::fs::read_to_string(files.with_extension("out.0"))
+                .ok()
+                .map(|text| instructions_in_object(&text, &exe.display().to_string()));
+            let log = std::fs::read_to_string(files.with_extension("log.0")).unwrap_or_default();
+            (out, counted.ok_or(log))
         }
         BackendKind::Serial | BackendKind::Rayon => {
             let out = Command::new("valgrind")
-                .args(callgrind)
+                .args(["--tool=callgrind", "--callgrind-out-file=/dev/null"])
                 .arg(&program.exe)
                 .args(command)
                 .args(&slowdown)
                 .output()
                 .context("cannot run valgrind")?;
             let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-            (out, stderr)
+            let collected = stderr
+                .lines()
+                .find_map(|line| line.split_once("Collected :").map(|(_, n)| n.trim()))
+                .and_then(|n| n.parse().ok());
+            (out, collected.ok_or(stderr))
         }
     };
-    let collected = log
-        .lines()
-        .find_map(|line| line.split_once("Collected :").map(|(_, n)| n.trim()))
-        .and_then(|n| n.parse().ok());
-    match (out.status.success(), collected) {
-        (true, Some(instructions)) => Ok(instructions),
-        _ => bail!(
+    match counted {
+        Ok(instructions) if out.status.success() => Ok(instructions),
+        counted => bail!(
             "callgrind of `{} {}` failed{}",
             program.exe.display(),
             command.join(" "),
             crate::system::process::tail(
                 "its output",
-                &format!("{log}{}", String::from_utf8_lossy(&out.stderr))
+                &format!(
+                    "{}{}",
+                    String::from_utf8_lossy(&out.stderr),
+                    counted.err().unwrap_or_default()
+                )
             )
         ),
     }
+}
+
+/// The instructions a callgrind output file (its text) counts in the object file
+/// `object` itself (the self cost of its functions, not of what they call).
+fn instructions_in_object(text: &str, object: &str) -> u64 {
+    // Names are compressed: `ob=(3) /path` the first time, `ob=(3)` after.
+    let mut names: BTreeMap<String, String> = BTreeMap::new();
+    let mut name_of = |spec: &str| -> Option<String> {
+        let (id, name) = spec.strip_prefix('(')?.split_once(')')?;
+        let name = name.trim();
+        match name.is_empty() {
+            true => names.get(id).cloned(),
+            false => {
+                names.insert(id.to_owned(), name.to_owned());
+                Some(name.to_owned())
+            }
+        }
+    };
+    let (mut counting, mut call_cost_next, mut total) = (false, false, 0);
+    for line in text.lines() {
+        if let Some(spec) = line.strip_prefix("ob=") {
+            counting = name_of(spec).as_deref() == Some(object);
+        } else if let Some(spec) = line.strip_prefix("cob=") {
+            name_of(spec);
+        } else if line.starts_with("calls=") {
+            // The next cost line is what the call cost, inclusively: not self cost.
+            call_cost_next = true;
+        } else if line.starts_with(|c: char| c.is_ascii_digit() || "+-*".contains(c)) {
+            let cost: u64 = match line.split_whitespace().nth(1) {
+                Some(cost) => cost.parse().unwrap_or(0),
+                None => 0,
+            };
+            if counting && !call_cost_next {
+                total += cost;
+            }
+            call_cost_next = false;
+        }
+    }
+    total
 }
 
 /// The markdown summary, printed to the terminal and written to `summary.md`.
@@ -986,5 +1035,17 @@ mod tests {
         // Baselines from before boot ids were kept, and systems that do not tell.
         assert!(!timings_decide("", "boot-b"));
         assert!(!timings_decide("", ""));
+    }
+
+    #[test]
+    fn instructions_in_an_object_are_its_own_not_those_of_what_it_calls() {
+        let text = "events: Ir\nsummary: 1111\n\n\
+                    ob=(1) /bin/collide\nfl=(1) a.rs\nfn=(1) step\n10 100\n+2 5\n\
+                    cob=(2) /lib/libmpi.so\ncfn=(2) MPI_Wait\ncalls=1 0\n12 900\n\
+                    ob=(2)\nfn=(2)\n0 900\n\
+                    ob=(1)\nfn=(3) collide\n* 6\n";
+        assert_eq!(instructions_in_object(text, "/bin/collide"), 111);
+        assert_eq!(instructions_in_object(text, "/lib/libmpi.so"), 900);
+        assert_eq!(instructions_in_object(text, "/bin/other"), 0);
     }
 }
