@@ -13,7 +13,7 @@ use crate::cli::{
     CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs, ViewArgs,
 };
 use crate::exit::RunsFailed;
-use crate::report::figures::{self, cooling::Cooling, scaling};
+use crate::report::figures::{self, cooling::Cooling, history::History, scaling};
 use crate::report::{accuracy, analysis, markdown, tables as results};
 use crate::run::backend_kind::BackendKind;
 use crate::run::limits::{Machine, WorkerSource, check_memory, check_workers, placement_note};
@@ -160,6 +160,9 @@ fn view_scene(args: &ViewArgs) -> anyhow::Result<()> {
 const SCENE_PICTURE: &str = "scene.png";
 
 fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
+    if check::history::is_history(&args.path) {
+        return write_history_report(args);
+    }
     let records = results::load(&args.path)?;
     let study = results::one_study(&records, &args.path)?;
     let out = match &args.out {
@@ -176,6 +179,32 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
         }
     };
     report_into(&records, &args.path, &out)
+}
+
+/// The report of a check history folder: its figure and table in `--out` (default
+/// reports/history/).
+fn write_history_report(args: &ReportArgs) -> anyhow::Result<()> {
+    let entries = check::history::read(&args.path)?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| Path::new("reports").join("history"));
+    std::fs::create_dir_all(&out).with_context(|| {
+        format!(
+            "cannot create the report folder {}; choose another with --out",
+            out.display()
+        )
+    })?;
+    figures::write(&History(&entries), &out)?;
+    let path = out.join("report.md");
+    let text = markdown::history(&entries, &args.path);
+    write_atomically(&path, |file| file.write_all(text.as_bytes()))?;
+    println!(
+        "history of {} checks drawn: {}",
+        figures::history::checks(&entries).len(),
+        path.display()
+    );
+    Ok(())
 }
 
 /// Writes the report of `records` (read from `source`) into the folder `out`: report.md
