@@ -7,12 +7,10 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use polars::prelude::{
-    Column, DataFrame, ParquetCompression, ParquetReader, ParquetWriter, SerReader,
-};
+use polars::prelude::{Column, DataFrame, ParquetReader, SerReader};
 
 use crate::study::environment::Environment;
-use crate::system::output::{free_path, write_atomically};
+use crate::system::output::free_path;
 
 /// Version of the history files, their first column.
 const HISTORY_VERSION: u32 = 1;
@@ -72,14 +70,8 @@ pub fn append(dir: &Path, environment: &Environment, entries: &[Entry]) -> anyho
         .filter(char::is_ascii_alphanumeric)
         .collect();
     let base = format!("{stamp}-{}", environment.git_commit);
-    let mut frame = to_frame(entries)?;
-    let mut bytes = Vec::new();
-    ParquetWriter::new(&mut bytes)
-        .with_compression(ParquetCompression::Zstd(None))
-        .finish(&mut frame)
-        .context("cannot encode the history as Parquet")?;
     let path = free_path(dir, &base, "parquet");
-    write_atomically(&path, |out| out.write_all(&bytes))?;
+    crate::study::records::write_frame(&path, &mut to_frame(entries)?, "the history")?;
     Ok(path)
 }
 

@@ -1032,4 +1032,71 @@ mod tests {
         assert_eq!(instructions_in_object(text, "/lib/libmpi.so"), 900);
         assert_eq!(instructions_in_object(text, "/bin/other"), 0);
     }
+
+    /// Runs of one configuration: A's wall times, and B's, one per round.
+    fn runs(key: &str, a: &[f64], b: &[f64]) -> Vec<Record> {
+        let environment = Environment::capture();
+        let context = records::serial_context(&environment);
+        let run = |side: &str, repetition: usize, wall_s: f64| {
+            let mut row = Record::failed(&context, STATUS_OK, String::new());
+            (row.config_key, row.ab_side) = (key.to_owned(), side.to_owned());
+            (row.repetition, row.wall_s, row.cpu_s) = (repetition as u32, wall_s, wall_s);
+            row
+        };
+        let mut rows = Vec::new();
+        for (round, (&a, &b)) in a.iter().zip(b).enumerate() {
+            rows.extend([run(SIDE_A, round, a), run(SIDE_B, round, b)]);
+        }
+        rows
+    }
+
+    #[test]
+    fn each_configuration_is_judged_by_its_own_pairs() {
+        let a = [1.00, 1.30, 0.90, 1.10, 1.25, 0.95, 1.05, 1.15];
+        let same: Vec<f64> = a.iter().map(|t| t * 1.01).collect();
+        let slower: Vec<f64> = a.iter().map(|t| t * 1.20).collect();
+        let mut rows = runs("fast", &a, &same);
+        rows.extend(runs("slow", &a, &slower));
+        // A failed B run leaves its round unpaired.
+        rows.last_mut().unwrap().status = "failed".to_owned();
+        let compared = compare_ab(&rows, 0.10).unwrap();
+        assert_eq!(compared.len(), 2);
+        assert_eq!(
+            (compared[0].key.as_str(), compared[0].verdict),
+            ("fast", Verdict::Unchanged)
+        );
+        assert_eq!(
+            (compared[1].key.as_str(), compared[1].verdict),
+            ("slow", Verdict::Regressed)
+        );
+        assert!(compared[1].what.contains("7 pairs"), "{}", compared[1].what);
+        assert!((compared[1].ratio.point - 1.2).abs() < 1e-9);
+        // The paired CPU-time ratio rides along in the note.
+        assert!(
+            compared[1].note.contains("CPU ratio 1.200"),
+            "{}",
+            compared[1].note
+        );
+    }
+
+    #[test]
+    fn instruction_counts_are_compared_per_backend_and_command() {
+        let count = |backend: &str, instructions| InstructionCount {
+            backend: backend.to_owned(),
+            command: vec!["simulate".to_owned(), backend.to_owned()],
+            instructions,
+        };
+        let old = [count("serial", 1000), count("rayon", 1000)];
+        let new = [count("serial", 1005), count("rayon", 1020), count("mpi", 9)];
+        let rows = compare_instructions(&old, &new);
+        let verdicts: Vec<(&str, Verdict)> =
+            rows.iter().map(|r| (r.key.as_str(), r.verdict)).collect();
+        assert_eq!(
+            verdicts,
+            [
+                ("serial", Verdict::Unchanged),
+                ("rayon", Verdict::Regressed)
+            ]
+        );
+    }
 }

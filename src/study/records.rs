@@ -486,14 +486,18 @@ fn upgrade(frame: &DataFrame, version: u32) -> anyhow::Result<DataFrame> {
 
 /// Writes the records to `path` atomically (Parquet, zstd).
 pub fn write(path: &Path, records: &[Record]) -> anyhow::Result<()> {
-    let mut frame = to_frame(records)?;
+    write_frame(path, &mut to_frame(records)?, "the records")
+}
+
+/// Writes `frame` (`what` it holds, for the message) to `path` atomically (Parquet, zstd).
+pub fn write_frame(path: &Path, frame: &mut DataFrame, what: &str) -> anyhow::Result<()> {
     // Encoded in memory first (result tables are small), so that a failing disk's own
     // error reaches the message rather than the encoder's "transport error".
     let mut bytes = Vec::new();
     ParquetWriter::new(&mut bytes)
         .with_compression(ParquetCompression::Zstd(None))
-        .finish(&mut frame)
-        .context("cannot encode the records as Parquet")?;
+        .finish(frame)
+        .with_context(|| format!("cannot encode {what} as Parquet"))?;
     write_atomically(path, |out| out.write_all(&bytes))
 }
 
