@@ -160,7 +160,7 @@ fn view_scene(args: &ViewArgs) -> anyhow::Result<()> {
 const SCENE_PICTURE: &str = "scene.png";
 
 fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
-    if check::history::is_history(&args.path) {
+    if crate::study::history::is_history(&args.path) {
         return write_history_report(args);
     }
     let records = results::load(&args.path)?;
@@ -184,7 +184,7 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
 /// The report of a check history folder: its figure and table in `--out` (default
 /// reports/history/).
 fn write_history_report(args: &ReportArgs) -> anyhow::Result<()> {
-    let entries = check::history::read(&args.path)?;
+    let entries = crate::study::history::read(&args.path)?;
     let out = args
         .out
         .clone()

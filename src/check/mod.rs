@@ -6,11 +6,10 @@
 //! interleaved with this one in the same job, and the paired ratios of the two decide.
 //! Verdicts come from `stats`; instruction counts of each backend under callgrind, where
 //! valgrind is installed, are a second, nearly noise-free signal. Each check appends its
-//! verdicts to a history (`history`).
+//! verdicts to a history (`study::history`).
 
 pub mod against;
 pub mod calibrate;
-pub mod history;
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -25,6 +24,7 @@ use crate::run::backend_kind::BackendKind;
 use crate::stats::median;
 use crate::stats::{self, Interval, Verdict};
 use crate::study::environment::Environment;
+use crate::study::history;
 use crate::study::manifest::{self, Configuration};
 use crate::study::records::{self, Record, STATUS_OK};
 use crate::study::runner::{self, Calibration, Program, RunOptions, Slowdown};

@@ -6,7 +6,6 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use crate::check::history::Entry;
 use crate::report::accuracy::{
     AccuracyPoint, Breakdown, CoolingCurve, FAILURE_MISSED_FRACTION, FLAG_WALL_PENETRATION,
     HAFF_BREAKDOWN, PackingGroup, method_label,
@@ -16,6 +15,7 @@ use crate::report::figures::cooling::COOLING_FILE;
 use crate::report::figures::history::{HISTORY_FILE, checks};
 use crate::report::figures::scaling::Figure;
 use crate::run::backend_kind::BackendKind;
+use crate::study::history::Entry;
 use crate::study::manifest::Scaling;
 use crate::study::records::{Record, STATUS_OK};
 

@@ -6,8 +6,8 @@
 use anyhow::anyhow;
 use plotters::prelude::*;
 
-use crate::check::history::Entry;
 use crate::report::figures::{Chart, FONT, PALETTE, draw_legend, titled_canvas};
+use crate::study::history::Entry;
 use crate::system::output::Canvas;
 
 /// The figure of a check history's entries (oldest check first).

@@ -1,7 +1,8 @@
 //! The check's history: every check appends the verdicts that decided it (one row per
 //! configuration and per instruction count) to a folder, one Parquet file per check,
 //! named by its time and commit and never overwritten; `collide report` on the folder
-//! draws them over the commits. Reading and writing only: the verdicts are the check's.
+//! draws them over the commits. Reading and writing only: the verdicts are the check's
+//! (`collide check`).
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
