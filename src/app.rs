@@ -13,7 +13,7 @@ use crate::cli::{
     CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs, ViewArgs,
 };
 use crate::exit::RunsFailed;
-use crate::report::figures::{self, cooling::Cooling, scaling};
+use crate::report::figures::{self, cooling::Cooling, history::History, scaling};
 use crate::report::{accuracy, analysis, markdown, tables as results};
 use crate::run::backend_kind::BackendKind;
 use crate::run::limits::{Machine, WorkerSource, check_memory, check_workers, placement_note};
@@ -22,7 +22,7 @@ use crate::run::spec::InjectedSlowdown;
 #[cfg(feature = "mpi")]
 use crate::run::summary::RunSummary;
 use crate::study::records::{self, Record, STATUS_OK};
-use crate::study::runner::{Calibration, RunOptions};
+use crate::study::runner::{Calibration, RunOptions, Slowdown};
 use crate::study::{manifest, runner};
 use crate::system::output::{check_output_file, write_atomically, write_state_csv};
 use crate::view::render;
@@ -69,7 +69,12 @@ fn run_check(args: &CheckArgs) -> anyhow::Result<Outcome> {
         update_baseline: args.update_baseline,
         out: args.out.clone(),
         noise: args.noise,
-        inject_slowdown: args.inject_slowdown,
+        slowdown: Slowdown {
+            fraction: args.inject_slowdown,
+            into: args.inject_into,
+        },
+        against: args.against.clone(),
+        history: (!args.no_history && !args.update_baseline).then(|| args.history.clone()),
         quiet: args.quiet,
     };
     Ok(match check::run(&options)? {
@@ -155,6 +160,9 @@ fn view_scene(args: &ViewArgs) -> anyhow::Result<()> {
 const SCENE_PICTURE: &str = "scene.png";
 
 fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
+    if crate::study::history::is_history(&args.path) {
+        return write_history_report(args);
+    }
     let records = results::load(&args.path)?;
     let study = results::one_study(&records, &args.path)?;
     let out = match &args.out {
@@ -171,6 +179,32 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
         }
     };
     report_into(&records, &args.path, &out)
+}
+
+/// The report of a check history folder: its figure and table in `--out` (default
+/// reports/history/).
+fn write_history_report(args: &ReportArgs) -> anyhow::Result<()> {
+    let entries = crate::study::history::read(&args.path)?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| Path::new("reports").join("history"));
+    std::fs::create_dir_all(&out).with_context(|| {
+        format!(
+            "cannot create the report folder {}; choose another with --out",
+            out.display()
+        )
+    })?;
+    figures::write(&History(&entries), &out)?;
+    let path = out.join("report.md");
+    let text = markdown::history(&entries, &args.path);
+    write_atomically(&path, |file| file.write_all(text.as_bytes()))?;
+    println!(
+        "history of {} checks drawn: {}",
+        figures::history::checks(&entries).len(),
+        path.display()
+    );
+    Ok(())
 }
 
 /// Writes the report of `records` (read from `source`) into the folder `out`: report.md
@@ -241,7 +275,7 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
         out: args.out.clone(),
         resume: args.resume,
         quiet: args.quiet,
-        simulate_args: Vec::new(),
+        programs: vec![runner::Program::this()?],
         calibrate: false,
     };
     let outcome = runner::run_study(&study, &text, &options)?;

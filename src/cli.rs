@@ -86,6 +86,10 @@ const CHECK_EXAMPLES: &str = "\
 Examples:
   Time experiments/ci.toml and compare it with results/baseline/
     collide check
+  Also build the commit that recorded the baseline and run both builds interleaved (what CI runs)
+    collide check --against
+  Against the previous commit
+    collide check --against HEAD~1
   Record a new baseline on purpose (then commit results/baseline/)
     collide check --update-baseline
   A stricter noise threshold (5%)
@@ -141,9 +145,30 @@ pub struct CheckArgs {
     /// whole confidence interval of its time ratio lies above 1 + this.
     #[arg(long, value_name = "FRACTION", default_value_t = 0.10, value_parser = parse_fraction)]
     pub noise: f64,
-    /// Add this fraction of extra work to every step of the measured runs (testing only).
+    /// Also build REV (any git revision; default: the commit that recorded the
+    /// baseline) and run both builds interleaved: the paired ratios of this build to
+    /// REV's decide, the baseline comparison is shown beside.
+    #[arg(long, value_name = "REV", num_args = 0..=1, default_missing_value = "", conflicts_with = "update_baseline")]
+    pub against: Option<String>,
+    /// Folder to which each check appends its verdicts (`collide report DIR` draws them).
+    #[arg(long, value_name = "DIR", default_value = "results/history")]
+    pub history: PathBuf,
+    /// Append nothing to the history.
+    #[arg(long, conflicts_with = "history")]
+    pub no_history: bool,
+    /// Add this fraction of extra work to every step of this build's measured runs
+    /// (testing only).
     #[arg(long, value_name = "FRACTION", default_value_t = 0.0, value_parser = parse_fraction, hide = true)]
     pub inject_slowdown: f64,
+    /// Only into the runs of this backend (with --inject-slowdown; default: every backend).
+    #[arg(
+        long,
+        value_enum,
+        value_name = "BACKEND",
+        requires = "inject_slowdown",
+        hide = true
+    )]
+    pub inject_into: Option<BackendKind>,
     /// No progress bar or notes.
     #[arg(long)]
     pub quiet: bool,

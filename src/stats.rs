@@ -1,6 +1,6 @@
 //! Pure statistics: the median (the tables, the accuracy analysis and the timing check
-//! all summarise repetitions by it), a seeded bootstrap confidence interval of the ratio
-//! of two medians, and the timing check's verdict as a pure function of that interval and a noise
+//! all summarise repetitions by it), seeded bootstrap confidence intervals of the ratio
+//! of two medians and of the median of paired ratios, and the timing check's verdict as a pure function of that interval and a noise
 //! threshold (criterion.rs' `compare_to_threshold`). No I/O and no clock: the same
 //! numbers give the same answer.
 
@@ -75,12 +75,40 @@ pub fn ratio_of_medians(new: &[f64], old: &[f64], confidence: f64, seed: u64) ->
     let mut ratios: Vec<f64> = (0..RESAMPLES)
         .map(|_| resampled_median(new, &mut rng) / resampled_median(old, &mut rng))
         .collect();
-    ratios.sort_by(f64::total_cmp);
+    let point = median(&mut new.to_vec()) / median(&mut old.to_vec());
+    central_interval(&mut ratios, confidence, point)
+}
+
+/// The median of the paired ratios `b[i] / a[i]` (runs of two builds measured next to
+/// each other, in the same round), with its central `confidence` interval from
+/// [`RESAMPLES`] bootstrap resamples of the pairs, drawn with the RNG seeded by `seed`.
+/// `a` and `b` are non-empty, of equal length, positive and finite. Pairing cancels what
+/// both runs of a pair share (a busy spell of the machine, a drift over the rounds),
+/// which the ratio of two medians keeps as spread.
+pub fn paired_ratio(a: &[f64], b: &[f64], confidence: f64, seed: u64) -> Interval {
+    assert_eq!(a.len(), b.len(), "paired samples of equal length");
+    let ratios: Vec<f64> = a.iter().zip(b).map(|(a, b)| b / a).collect();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let mut scratch = Vec::with_capacity(ratios.len());
+    let mut medians: Vec<f64> = (0..RESAMPLES)
+        .map(|_| {
+            scratch.clear();
+            scratch.extend((0..ratios.len()).map(|_| ratios[rng.random_range(0..ratios.len())]));
+            median(&mut scratch)
+        })
+        .collect();
+    central_interval(&mut medians, confidence, median(&mut ratios.clone()))
+}
+
+/// The central `confidence` interval of bootstrap estimates around `point`.
+fn central_interval(estimates: &mut [f64], confidence: f64, point: f64) -> Interval {
+    estimates.sort_by(f64::total_cmp);
     let tail = (1.0 - confidence) / 2.0;
-    let at = |quantile: f64| ratios[(quantile * (RESAMPLES - 1) as f64).round() as usize];
+    let last = (estimates.len() - 1) as f64;
+    let at = |quantile: f64| estimates[(quantile * last).round() as usize];
     Interval {
         lower: at(tail),
-        point: median(&mut new.to_vec()) / median(&mut old.to_vec()),
+        point,
         upper: at(1.0 - tail),
     }
 }
@@ -138,5 +166,57 @@ mod tests {
             verdict(&ratio_of_medians(&noisy_new, &noisy_old, 0.95, 1), 0.03),
             Verdict::Unchanged
         );
+    }
+
+    /// Times of one build over 12 rounds: scattered by a few percent.
+    const A: [f64; 12] = [
+        1.00, 1.03, 0.98, 1.01, 0.99, 1.02, 1.00, 0.97, 1.04, 1.01, 0.99, 1.02,
+    ];
+
+    #[test]
+    fn equal_pairs_give_a_paired_ratio_around_one() {
+        let b = A.map(|t| t * 1.001);
+        let ratio = paired_ratio(&A, &b, 0.95, 3);
+        assert!((ratio.point - 1.001).abs() < 1e-12, "{ratio:?}");
+        assert!(ratio.lower <= 1.001 && ratio.upper >= 1.001, "{ratio:?}");
+        assert_eq!(verdict(&ratio, 0.03), Verdict::Unchanged);
+        assert_eq!(ratio, paired_ratio(&A, &b, 0.95, 3));
+        // Pairs that scatter around 1 by ±2%: an interval that holds 1.
+        let jitter = [
+            1.02, 0.98, 1.01, 0.99, 1.0, 1.02, 0.98, 1.01, 0.99, 1.0, 1.02, 0.98,
+        ];
+        let b: Vec<f64> = A.iter().zip(jitter).map(|(a, j)| a * j).collect();
+        let ratio = paired_ratio(&A, &b, 0.95, 3);
+        assert!(ratio.lower < 1.0 && ratio.upper > 1.0, "{ratio:?}");
+    }
+
+    #[test]
+    fn a_paired_shift_beyond_the_spread_is_a_regression_or_an_improvement() {
+        let jitter = [
+            1.02, 0.98, 1.01, 0.99, 1.0, 1.02, 0.98, 1.01, 0.99, 1.0, 1.02, 0.98,
+        ];
+        let slower: Vec<f64> = A.iter().zip(jitter).map(|(a, j)| 1.06 * a * j).collect();
+        let ratio = paired_ratio(&A, &slower, 0.95, 5);
+        assert!(ratio.lower > 1.03 && ratio.upper < 1.09, "{ratio:?}");
+        assert_eq!(verdict(&ratio, 0.03), Verdict::Regressed);
+        let faster: Vec<f64> = A.iter().zip(jitter).map(|(a, j)| a * j / 1.06).collect();
+        assert_eq!(
+            verdict(&paired_ratio(&A, &faster, 0.95, 5), 0.03),
+            Verdict::Improved
+        );
+    }
+
+    #[test]
+    fn pairing_cancels_a_drift_that_an_unpaired_ratio_keeps() {
+        // The machine gets slower round by round (both builds alike, up to 1.6 times);
+        // B is 5% slower than A in every round.
+        let drift: Vec<f64> = (0..12).map(|round| 1.0 + 0.05 * round as f64).collect();
+        let a: Vec<f64> = A.iter().zip(&drift).map(|(a, d)| a * d).collect();
+        let b: Vec<f64> = a.iter().map(|a| 1.05 * a).collect();
+        let paired = paired_ratio(&a, &b, 0.95, 9);
+        assert!((paired.point - 1.05).abs() < 1e-12, "{paired:?}");
+        assert_eq!(verdict(&paired, 0.03), Verdict::Regressed);
+        let unpaired = ratio_of_medians(&b, &a, 0.95, 9);
+        assert_eq!(verdict(&unpaired, 0.03), Verdict::Unchanged, "{unpaired:?}");
     }
 }

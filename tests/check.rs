@@ -19,10 +19,12 @@ fn tiny_manifest(dir: &Path) -> String {
         .to_owned()
 }
 
-/// `collide check MANIFEST --baseline DIR/BASELINE --out DIR/out --quiet EXTRA...`.
+/// `collide check MANIFEST --baseline DIR/BASELINE --out DIR/out --quiet --history
+/// DIR/history EXTRA...`.
 fn check(dir: &Path, manifest: &str, baseline: &str, extra: &[&str]) -> Output {
     let baseline = dir.join(baseline);
     let out = dir.join("out");
+    let history = dir.join("history");
     let args = [
         &[
             "check",
@@ -32,6 +34,8 @@ fn check(dir: &Path, manifest: &str, baseline: &str, extra: &[&str]) -> Output {
             "--out",
             out.to_str().unwrap(),
             "--quiet",
+            "--history",
+            history.to_str().unwrap(),
         ],
         extra,
     ]
@@ -83,6 +87,11 @@ fn an_injected_slowdown_regresses_and_an_injected_speed_up_improves() {
     let stdout = text(&slower.stdout);
     assert!(stdout.contains("**regressed**"), "{stdout}");
     assert!(dir.path().join("out/summary.md").exists());
+    // Every comparing check appended its verdicts to the history, each to a file of its own.
+    let histories = std::fs::read_dir(dir.path().join("history"))
+        .unwrap()
+        .count();
+    assert_eq!(histories, 2);
     // Not asserted: the A/A verdict, which is a measured rate (docs/ci-check.md), not a certainty.
     assert_ne!(same.status.code(), Some(2), "{}", text(&same.stderr));
 

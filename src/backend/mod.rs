@@ -78,10 +78,11 @@ pub struct StageSeconds {
 /// after it (the event method at a detected collapse).
 ///
 /// The extra work is integer arithmetic on the calling thread, counted on the clock that
-/// `collide check` compares: after each step it runs until the CPU seconds of `scope`
-/// have grown by `fraction` of what the step itself took (wall seconds where CPU time is
-/// unknown). A fraction of 0.1 therefore makes the loop's CPU time 10% larger whatever
-/// else runs on the machine; what one step overshoots, the next one owes less.
+/// `collide check` judges, the wall clock: after each step it runs until the wall time
+/// has grown by `fraction` of what the step itself took. A fraction of 0.1 therefore
+/// makes the loop's wall time 10% larger on every backend (on the parallel ones the
+/// other threads or ranks wait meanwhile, as behind a serialised stage); what one step
+/// overshoots, the next one owes less. `scope` is the CPU time the loop reports.
 pub fn step_loop(
     steps: u64,
     slowdown: InjectedSlowdown,
@@ -92,7 +93,7 @@ pub fn step_loop(
     let cpu_start = cpu_seconds(scope);
     let loop_start = Instant::now();
     if fraction > 0.0 {
-        let clock = || cpu_seconds(scope).unwrap_or_else(|| loop_start.elapsed().as_secs_f64());
+        let clock = || loop_start.elapsed().as_secs_f64();
         let mut owed = 0.0;
         for number in 1..=steps {
             let before = clock();

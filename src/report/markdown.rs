@@ -1,8 +1,10 @@
 //! `collide report`: a study's records as a markdown report in the shape of the seed's
 //! results (its Cuadro 1, speedup, efficiency, FPS), with the environment, warnings and
-//! findings drawn from the data, linking the figures drawn beside it (`figures`).
+//! findings drawn from the data, linking the figures drawn beside it (`figures`); and
+//! the check history's report (its verdicts over commits).
 
 use std::fmt::Write as _;
+use std::path::Path;
 
 use crate::report::accuracy::{
     AccuracyPoint, Breakdown, CoolingCurve, FAILURE_MISSED_FRACTION, FLAG_WALL_PENETRATION,
@@ -10,8 +12,10 @@ use crate::report::accuracy::{
 };
 use crate::report::analysis::{Baseline, Setup};
 use crate::report::figures::cooling::COOLING_FILE;
+use crate::report::figures::history::{HISTORY_FILE, checks};
 use crate::report::figures::scaling::Figure;
 use crate::run::backend_kind::BackendKind;
+use crate::study::history::Entry;
 use crate::study::manifest::Scaling;
 use crate::study::records::{Record, STATUS_OK};
 
@@ -668,4 +672,40 @@ fn cooling_section(out: &mut String, curves: &[CoolingCurve]) {
         );
     }
     let _ = writeln!(out, "\n![{COOLING_FILE}]({COOLING_FILE})\n");
+}
+
+/// The report of a check history (read from `source`): its figure, then one row per
+/// verdict, oldest check first.
+pub fn history(entries: &[Entry], source: &Path) -> String {
+    let mut out = format!(
+        "# collide check history\n\nFrom `{}`: {} verdict(s) of {} check(s). Ratio = this \
+         build over what the check compared it with (the build it was checked against in an \
+         A/B check, or the baseline), with its 95% interval.\n\n![ratios over commits]({})\n\n\
+         | checked (UTC) | commit | compared with | configuration | measure | ratio | 95% interval | verdict |\n\
+         | --- | --- | --- | --- | --- | ---: | --- | --- |\n",
+        source.display(),
+        entries.len(),
+        checks(entries).len(),
+        HISTORY_FILE,
+    );
+    for e in entries {
+        let _ = writeln!(
+            out,
+            "| {} | {}{} | {} | {} | {} | {:.3} | {:.3}–{:.3} | {} |",
+            e.checked_utc,
+            e.commit,
+            if e.dirty { " (dirty)" } else { "" },
+            e.against,
+            e.what,
+            e.measure,
+            e.ratio,
+            e.lower,
+            e.upper,
+            match e.verdict.as_str() {
+                "regressed" => "**regressed**",
+                verdict => verdict,
+            }
+        );
+    }
+    out
 }

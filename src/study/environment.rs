@@ -38,7 +38,8 @@ pub struct Environment {
     pub load_average_start: f64,
 }
 
-const UNKNOWN: &str = "unknown";
+/// A field the system does not tell (a CPU model, a commit outside a git checkout).
+pub const UNKNOWN: &str = "unknown";
 
 impl Environment {
     pub fn capture() -> Environment {

@@ -1,10 +1,12 @@
 //! Studies: manifests validated into configurations (`manifest`, with the safe `names`
 //! that become paths), the runner that times each configuration as a fresh
 //! `collide simulate` child process (`runner`), the Parquet records it keeps run by run
-//! (`records`) and the machine and build they were measured on (`environment`). A study
-//! never calls a backend or the simulation itself.
+//! (`records`), the machine and build they were measured on (`environment`), and the
+//! CI check's verdicts over commits (`history`). A study never calls a backend or the
+//! simulation itself.
 
 pub mod environment;
+pub mod history;
 pub mod manifest;
 pub mod names;
 pub mod records;

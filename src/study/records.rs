@@ -16,7 +16,7 @@ use crate::study::environment::Environment;
 use crate::study::manifest::Scaling;
 use crate::system::output::write_atomically;
 
-pub const SCHEMA_VERSION: u32 = 7;
+pub const SCHEMA_VERSION: u32 = 8;
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
 const OLDEST_READABLE_VERSION: u32 = 1;
 
@@ -68,6 +68,8 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     // Version 6 never drew a run offscreen.
     (7, "draw_s", Fill::F64(f64::NAN)),
     (7, "fps_with_drawing", Fill::F64(f64::NAN)),
+    // Version 7 ran one program per study, never an A/B check.
+    (8, "ab_side", Fill::Str("")),
 ];
 
 /// What became of one run.
@@ -313,7 +315,7 @@ macro_rules! for_each_column {
                  boundary <- run, broadphase <- run, state_hash <- run, hostname, cpu_model, os,
                  rustc, profile, features, git_commit, mpi_library, study_started_utc,
                  finished_utc, method <- run, observe <- run, choice <- run,
-                 temperature_curve <- run, cpu_affinity;
+                 temperature_curve <- run, cpu_affinity, ab_side;
             u64: threads <- run, ranks <- run, workers <- run, n <- run, steps <- run,
                  pair_collisions <- run, wall_collisions <- run, logical_cores, physical_cores,
                  memory_bytes;
@@ -484,14 +486,18 @@ fn upgrade(frame: &DataFrame, version: u32) -> anyhow::Result<DataFrame> {
 
 /// Writes the records to `path` atomically (Parquet, zstd).
 pub fn write(path: &Path, records: &[Record]) -> anyhow::Result<()> {
-    let mut frame = to_frame(records)?;
+    write_frame(path, &mut to_frame(records)?, "the records")
+}
+
+/// Writes `frame` (`what` it holds, for the message) to `path` atomically (Parquet, zstd).
+pub fn write_frame(path: &Path, frame: &mut DataFrame, what: &str) -> anyhow::Result<()> {
     // Encoded in memory first (result tables are small), so that a failing disk's own
     // error reaches the message rather than the encoder's "transport error".
     let mut bytes = Vec::new();
     ParquetWriter::new(&mut bytes)
         .with_compression(ParquetCompression::Zstd(None))
-        .finish(&mut frame)
-        .context("cannot encode the records as Parquet")?;
+        .finish(frame)
+        .with_context(|| format!("cannot encode {what} as Parquet"))?;
     write_atomically(path, |out| out.write_all(&bytes))
 }
 

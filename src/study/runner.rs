@@ -1,6 +1,8 @@
 //! Runs a study: every configuration in a fresh `collide simulate` process (MPI through
 //! its launcher), warm-ups first, then the repetitions interleaved across
-//! configurations so that drift of the machine hits all of them alike. Each finished
+//! configurations so that drift of the machine hits all of them alike. An A/B check runs
+//! two programs (two builds of collide) the same way, each repetition of a configuration
+//! once by each, next to each other, in alternating order (A B, then B A). Each finished
 //! repetition is written at once (the whole file, atomically), so a crash, a kill or
 //! Ctrl-C loses nothing already measured, and `--resume` runs only what is missing.
 //! One study at a time writes into a study folder (a lock a second run waits for), each
@@ -23,7 +25,7 @@ use crate::study::manifest::{Configuration, SceneInput, Study};
 use crate::study::records::{
     self, Record, RecordContext, STATUS_FAILED, STATUS_OK, STATUS_TIMED_OUT,
 };
-use crate::system::output::{remove_leftovers, write_atomically};
+use crate::system::output::{free_path, remove_leftovers, write_atomically};
 use crate::system::process::{Ended, interrupt_note, run_with_timeout, tail};
 
 /// How to run a study.
@@ -35,11 +37,72 @@ pub struct RunOptions {
     pub resume: bool,
     /// No progress bar or notes (also when stdout is not a terminal).
     pub quiet: bool,
-    /// Extra `collide simulate` arguments for every run (e.g. `--inject-slowdown`).
-    pub simulate_args: Vec<String>,
+    /// The programs that run every repetition, one after the other: this one alone in
+    /// a study ([`Program::this`]); the build checked against and this one in an A/B check.
+    pub programs: Vec<Program>,
     /// Time the calibration workload (`collide calibrate`) before every round of
     /// repetitions, interleaved with the configurations.
     pub calibrate: bool,
+}
+
+/// A `collide` program that runs the repetitions of a study.
+#[derive(Clone, Debug)]
+pub struct Program {
+    /// Its side of an A/B check (`A` the build checked against, `B` this one), recorded
+    /// in the `ab_side` column; empty in a study.
+    pub side: &'static str,
+    pub exe: PathBuf,
+    /// The commit it was built from, when it is not this build (recorded in the rows it
+    /// ran instead of this build's commit).
+    pub commit: Option<String>,
+    /// Extra work in the runs of some configurations (testing the check only).
+    pub slowdown: Slowdown,
+}
+
+impl Program {
+    /// This program, with nothing injected.
+    pub fn this() -> anyhow::Result<Program> {
+        Ok(Program {
+            side: "",
+            exe: this_exe()?,
+            commit: None,
+            slowdown: Slowdown::default(),
+        })
+    }
+}
+
+/// This program's path.
+pub fn this_exe() -> anyhow::Result<PathBuf> {
+    std::env::current_exe().context("cannot find this program's path")
+}
+
+/// An injected slowdown (`--inject-slowdown FRACTION`) of the runs of one backend's
+/// configurations, or of every configuration; none by default.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Slowdown {
+    pub fraction: f64,
+    /// The only backend slowed down; `None`: every backend.
+    pub into: Option<BackendKind>,
+}
+
+impl Slowdown {
+    /// The `collide simulate` arguments that slow down a run of `backend`.
+    pub fn simulate_args(&self, backend: BackendKind) -> Vec<String> {
+        match self.fraction > 0.0 && self.into.is_none_or(|into| into == backend) {
+            true => vec!["--inject-slowdown".to_owned(), self.fraction.to_string()],
+            false => Vec::new(),
+        }
+    }
+}
+
+/// The order in which the programs run repetition `rep` of configuration `c`: as given
+/// and reversed in turn (A B, B A, A B, ...), so that neither always runs first.
+fn run_order(programs: &[Program], rep: u32, c: usize) -> Vec<&Program> {
+    let mut order: Vec<&Program> = programs.iter().collect();
+    if (rep as usize + c) % 2 == 1 {
+        order.reverse();
+    }
+    order
 }
 
 /// What a study run left behind.
@@ -111,7 +174,8 @@ pub fn run_study(
         .filter(|&(rep, c)| !done.contains(&(configurations[c].key(), rep)))
         .collect();
     let warm: BTreeSet<usize> = todo.iter().map(|&(_, c)| c).collect();
-    let total = (warm.len() * study.warmups as usize + todo.len()) as u64;
+    let n_programs = options.programs.len();
+    let total = (n_programs * (warm.len() * study.warmups as usize + todo.len())) as u64;
     let progress = progress_bar(quiet, total);
     note(&format!(
         "study {}: {} configurations × {} repetitions (+{} warm-up each) → {}",
@@ -123,19 +187,19 @@ pub fn run_study(
     ));
 
     let children = Children {
-        exe: std::env::current_exe().context("cannot find this program's path")?,
+        exe: this_exe()?,
         timeout: study.timeout,
-        simulate_args: &options.simulate_args,
     };
-    let run = |configuration: &Configuration, scene: &Path| children.simulate(configuration, scene);
     let started_utc = records::utc_now();
     let mut calibrations = Vec::new();
     for &c in &warm {
-        for _ in 0..study.warmups {
-            progress.set_message(format!("warm-up {}", configurations[c].key()));
-            // A warm-up that fails will fail again when measured, and be recorded then.
-            let _ = run(configurations[c], &scene_files[c]);
-            progress.inc(1);
+        for program in &options.programs {
+            for _ in 0..study.warmups {
+                progress.set_message(format!("warm-up {}", configurations[c].key()));
+                // A warm-up that fails will fail again when measured, and be recorded then.
+                let _ = children.simulate(program, configurations[c], &scene_files[c]);
+                progress.inc(1);
+            }
         }
     }
     let (mut measured, mut failed) = (0, 0);
@@ -160,19 +224,26 @@ pub fn run_study(
             environment: &environment,
             study_started_utc: &started_utc,
         };
-        let record = record_of(&context, run(configuration, &scene_files[c]), study.timeout);
-        if record.status == STATUS_OK {
-            measured += 1;
-        } else {
-            failed += 1;
-            progress.suspend(|| eprintln!("run failed: {key}: {}", record.error));
+        for program in run_order(&options.programs, rep, c) {
+            let ended = children.simulate(program, configuration, &scene_files[c]);
+            let mut record = record_of(&context, ended, study.timeout);
+            record.ab_side = program.side.to_owned();
+            if let Some(commit) = &program.commit {
+                (record.git_commit, record.git_dirty) = (commit.clone(), false);
+            }
+            if record.status == STATUS_OK {
+                measured += 1;
+            } else {
+                failed += 1;
+                progress.suspend(|| eprintln!("run failed: {key}: {}", record.error));
+            }
+            rows.push(record);
+            let mut interrupted = interrupt_note();
+            records::write(&results, &rows)?;
+            *interrupted = kept_note(&rows);
+            drop(interrupted);
+            progress.inc(1);
         }
-        rows.push(record);
-        let mut interrupted = interrupt_note();
-        records::write(&results, &rows)?;
-        *interrupted = kept_note(&rows);
-        drop(interrupted);
-        progress.inc(1);
     }
     progress.finish_and_clear();
     if !todo.is_empty() {
@@ -187,24 +258,27 @@ pub fn run_study(
     })
 }
 
-/// This program's `simulate` and `calibrate`, run as child processes under the study's
-/// timeout.
-struct Children<'a> {
+/// The programs' `simulate` and this program's `calibrate`, run as child processes
+/// under the study's timeout.
+struct Children {
     exe: PathBuf,
     timeout: Duration,
-    /// Extra `collide simulate` arguments of every run.
-    simulate_args: &'a [String],
 }
 
-impl Children<'_> {
-    /// One run of `configuration` on the scene file `scene`.
-    fn simulate(&self, configuration: &Configuration, scene: &Path) -> std::io::Result<Ended> {
-        let mut command = Command::new(&self.exe);
+impl Children {
+    /// One run of `configuration` on the scene file `scene` by `program`.
+    fn simulate(
+        &self,
+        program: &Program,
+        configuration: &Configuration,
+        scene: &Path,
+    ) -> std::io::Result<Ended> {
+        let mut command = Command::new(&program.exe);
         command
             .arg("simulate")
             .arg(scene)
             .args(configuration.simulate_args())
-            .args(self.simulate_args);
+            .args(program.slowdown.simulate_args(configuration.backend));
         run_with_timeout(command, self.timeout)
     }
 
@@ -472,14 +546,11 @@ fn new_results_path(dir: &Path, environment: &Environment) -> PathBuf {
             }
         })
         .collect();
-    let base = format!("{stamp}-{host}-{}", environment.git_commit);
-    (1..)
-        .map(|count| match count {
-            1 => dir.join(format!("{base}.parquet")),
-            _ => dir.join(format!("{base}-{count}.parquet")),
-        })
-        .find(|path| !path.exists())
-        .expect("a free name among unboundedly many")
+    free_path(
+        dir,
+        &format!("{stamp}-{host}-{}", environment.git_commit),
+        "parquet",
+    )
 }
 
 /// The results file in `dir` last written by the same manifest and build, with its rows;
@@ -561,5 +632,45 @@ mod tests {
         }
         let failed = record_of(&context, Ok(ended(3, "")), timeout);
         assert!(failed.error.contains("exit status: 3") && failed.error.contains("a warning"));
+    }
+
+    #[test]
+    fn programs_take_turns_to_run_first_and_slowdowns_stay_in_their_backend() {
+        let program = |side| Program {
+            side,
+            exe: PathBuf::from(side),
+            commit: None,
+            slowdown: Slowdown::default(),
+        };
+        let programs = [program("A"), program("B")];
+        let sides = |rep, c| -> Vec<&str> {
+            run_order(&programs, rep, c)
+                .iter()
+                .map(|p| p.side)
+                .collect()
+        };
+        assert_eq!(sides(0, 0), ["A", "B"]);
+        assert_eq!(sides(1, 0), ["B", "A"]);
+        assert_eq!(sides(2, 0), ["A", "B"]);
+        assert_eq!(sides(0, 1), ["B", "A"]);
+        let rayon = Slowdown {
+            fraction: 0.05,
+            into: Some(BackendKind::Rayon),
+        };
+        assert_eq!(
+            rayon.simulate_args(BackendKind::Rayon),
+            ["--inject-slowdown", "0.05"]
+        );
+        assert!(rayon.simulate_args(BackendKind::Serial).is_empty());
+        let everywhere = Slowdown {
+            into: None,
+            ..rayon
+        };
+        assert_eq!(everywhere.simulate_args(BackendKind::Mpi).len(), 2);
+        assert!(
+            Slowdown::default()
+                .simulate_args(BackendKind::Serial)
+                .is_empty()
+        );
     }
 }

@@ -5,7 +5,7 @@
 
 use std::io::{BufWriter, ErrorKind, Write};
 use std::os::unix::fs::PermissionsExt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, anyhow, bail};
 use plotters::coord::Shift;
@@ -20,6 +20,18 @@ const TEMP_SUFFIX: &str = ".partial";
 
 /// A picture being drawn, in memory (RGB).
 pub type Canvas<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+
+/// `<dir>/<base>.<ext>`, or the first of `<base>-2.<ext>`, `<base>-3.<ext>`, ... that
+/// does not exist yet: a new file's name that takes no earlier file's place.
+pub fn free_path(dir: &Path, base: &str, ext: &str) -> PathBuf {
+    (1..)
+        .map(|count| match count {
+            1 => dir.join(format!("{base}.{ext}")),
+            _ => dir.join(format!("{base}-{count}.{ext}")),
+        })
+        .find(|path| !path.exists())
+        .expect("a free name among unboundedly many")
+}
 
 /// Writes a file through a temporary sibling and renames it into place, so readers
 /// never see a half-written file and a failure leaves any earlier file untouched.

@@ -1,13 +1,14 @@
 //! The report's figures (PNG, plotters), one file per figure behind one interface,
 //! [`Chart`]: the scaling figures of each setup (`scaling`: time, speedup, efficiency and
-//! steps per second against workers) and the accuracy study's (`pareto`, `stability`,
-//! `cooling`). Shared here: the embedded font (DejaVu Sans, so no system font is
+//! steps per second against workers), the accuracy study's (`pareto`, `stability`,
+//! `cooling`) and the check history's (`history`). Shared here: the embedded font (DejaVu Sans, so no system font is
 //! needed), the palette, the legend and the titled canvas.
 //!
 //! A new figure is a file with a type that implements [`Chart`], and one line in the
 //! list that draws it ([`accuracy_charts`] for the accuracy study's).
 
 pub mod cooling;
+pub mod history;
 pub mod pareto;
 pub mod scaling;
 pub mod stability;
