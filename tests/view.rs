@@ -41,7 +41,8 @@ fn runs_here(name: &str) -> bool {
     let Some(xvfb_run) = xvfb_run else {
         panic!(
             "{name} needs an X display: DISPLAY is not set and xvfb-run is not installed; \
-             install it (apt-get install xvfb x11-apps) or run the tests on a display"
+             install it with xauth, which xvfb-run needs (apt-get install xvfb xauth), or run \
+             the tests on a display"
         );
     };
     let status = Command::new(xvfb_run)
