@@ -1,9 +1,11 @@
 //! collide: a deterministic 2D hard-disk collision simulator and the harness that
 //! times it under serial, threaded and distributed backends.
 //!
-//! Arrows point one way (ARCHITECTURE.md draws the map):
-//! `cli`/`app` → `check` → `report` → `study` → `run` → `sim`, and `app` → `backend` →
-//! `run` → `sim`. `sim` is pure; `system` and `stats` are leaves anyone may use.
+//! Arrows point one way (ARCHITECTURE.md draws the map): `app` (behind `cli`) →
+//! `check` → `study` → `run` → `sim`; `app` → `report` → `study`; `app` and `view` →
+//! `backend` → `run`, `draw` → `sim`. `sim` is pure and imports nothing outside itself;
+//! `system`, `stats` and `exit` are leaves anyone may use (and `view` borrows
+//! `report`'s font).
 
 pub mod app;
 pub mod backend;

@@ -36,9 +36,9 @@ use super::calendar::EventCalendar;
 use super::cells::{CellGrid, NONE, Neighbour};
 use super::collapse::CollapseDetector;
 use super::collision::{PairSide, exchange_along};
+use super::counters::StepCounters;
 use super::particles::Particles;
 use super::scene::{Boundary, Domain, Physics};
-use super::step::StepCounters;
 
 /// Cells hold about this many disks in sparse boxes (bigger cells: fewer crossings, more
 /// candidates). 0.5 did best of 0.25–3 in cycles estimated by cachegrind (instructions,

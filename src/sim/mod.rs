@@ -6,6 +6,7 @@ pub mod calendar;
 pub mod cells;
 pub mod collapse;
 pub mod collision;
+pub mod counters;
 pub mod engine;
 pub mod event;
 pub mod grid;
@@ -19,6 +20,7 @@ pub mod schedule;
 pub mod snapshot;
 pub mod step;
 
+pub use counters::StepCounters;
 pub use particles::{Disk, DiskSlices, Particles};
 pub use scene::{Boundary, Domain, Physics, Scene};
-pub use step::{Broadphase, StepCounters, StepParams, Stepper};
+pub use step::{Broadphase, StepParams, Stepper};

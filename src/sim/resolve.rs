@@ -27,9 +27,9 @@
 //! sweeping each chain on its own: a backend may call this on any union of whole chains.
 
 use super::collision::{ContactOutcome, DiskState, resolve_contact};
+use super::counters::StepCounters;
 use super::grid::Contact;
 use super::scene::{Boundary, Domain, Physics, wrap_periodic};
-use super::step::StepCounters;
 
 /// Most resting-contact sweeps per step (Box2D defaults to 8 velocity iterations; a
 /// narrow pile under gravity needs more to hold its bottom disks within the slop).

@@ -8,7 +8,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::collision::ContactOutcome;
+use super::counters::StepCounters;
 use super::grid::{Contact, StripGrid, find_contacts_all_pairs};
 use super::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin, mark_escapees};
 use super::particles::{DiskSlices, Particles};
@@ -47,24 +47,6 @@ pub struct StepParams {
     /// Time step, positive and finite.
     pub dt: f64,
     pub broadphase: Broadphase,
-}
-
-/// Running totals of what the steps did.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct StepCounters {
-    /// Pair impulses applied (overlapping and approaching pairs).
-    pub pair_collisions: u64,
-    /// Wall reflections applied (a disk touching a wall and moving outward).
-    pub wall_collisions: u64,
-    /// Largest overlap seen, as a fraction of the pair's contact distance.
-    pub max_overlap: f64,
-    /// Largest penetration of a disk into a wall seen after a move, as a fraction of
-    /// its radius (0 with periodic boundaries).
-    pub max_wall_penetration: f64,
-    /// Σ overlap fraction over the pairs that received an impulse (for the mean overlap).
-    pub overlap_sum: f64,
-    /// Σ d·J over the impulses applied: the collision virial (for the pressure).
-    pub virial: f64,
 }
 
 /// Advances a set of disks in time. Holds scratch memory only; the caller owns the disks.
@@ -231,29 +213,6 @@ impl Stepper {
             &mut self.counters,
             collided,
         );
-    }
-}
-
-impl StepCounters {
-    /// Counts one resolved pair.
-    #[inline(always)]
-    pub fn record(&mut self, outcome: ContactOutcome) {
-        self.pair_collisions += u64::from(outcome.collided);
-        self.max_overlap = self.max_overlap.max(outcome.overlap_fraction);
-        if outcome.collided {
-            self.overlap_sum += outcome.overlap_fraction;
-        }
-        self.virial += outcome.virial;
-    }
-
-    /// Adds the counts of another worker's steps.
-    pub fn merge(&mut self, other: &StepCounters) {
-        self.pair_collisions += other.pair_collisions;
-        self.wall_collisions += other.wall_collisions;
-        self.max_overlap = self.max_overlap.max(other.max_overlap);
-        self.max_wall_penetration = self.max_wall_penetration.max(other.max_wall_penetration);
-        self.overlap_sum += other.overlap_sum;
-        self.virial += other.virial;
     }
 }
 
