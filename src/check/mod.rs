@@ -25,7 +25,7 @@ use crate::stats::median;
 use crate::stats::{self, Interval, Verdict};
 use crate::study::environment::Environment;
 use crate::study::history;
-use crate::study::manifest::{self, Configuration};
+use crate::study::manifest::{self, Configuration, Study};
 use crate::study::records::{self, Record, STATUS_OK};
 use crate::study::runner::{self, Calibration, Program, RunOptions, Slowdown};
 use crate::system::output::write_atomically;
@@ -178,6 +178,9 @@ struct AbCheck {
     rows: Vec<Row>,
 }
 
+/// Runs the check: the manifest by this build (and REV's, with `--against`), then the
+/// comparisons, the summary and the history. Records a new baseline instead with
+/// `--update-baseline`.
 pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
     let (study, text) = manifest::load(&options.manifest)?;
     let environment = Environment::capture();
@@ -206,47 +209,15 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
         )?),
         None => None,
     };
-    let programs = match &against {
-        Some((_, a)) => vec![
-            a.clone(),
-            Program {
-                side: SIDE_B,
-                ..this.clone()
-            },
-        ],
-        None => vec![this.clone()],
-    };
-    let run_options = RunOptions {
-        out: options.out.clone(),
-        resume: false,
-        quiet: options.quiet,
-        programs,
-        calibrate: true,
-    };
-    let outcome = runner::run_study(&study, &text, &run_options)?;
-    if outcome.failed > 0 {
-        return Err(RunsFailed(format!(
-            "{} run(s) of the check failed; their rows in {} say why (status, error)",
-            outcome.failed,
-            outcome.results.display()
-        ))
-        .into());
-    }
-    let rows = records::read(&outcome.results)?;
-    let scene_dir = options.out.join(&study.name);
-    let instructions = count_instructions(&study.configurations, &scene_dir, &this)?;
-    let info = BaselineInfo {
-        format: BASELINE_FORMAT,
-        recorded_utc: records::utc_now(),
-        manifest: options.manifest.display().to_string(),
+    let (info, rows) = measure(
+        &study,
+        &text,
+        options,
+        &this,
+        against.as_ref().map(|(_, a)| a),
         manifest_hash,
-        inject_slowdown: options.slowdown.fraction,
-        inject_into: options.slowdown.into.map(|kind| kind.name().to_owned()),
-        calibrations: outcome.calibrations,
-        instructions,
         environment,
-        boot_id: boot_id(),
-    };
+    )?;
     let Some((old_info, old_rows)) = baseline else {
         write_baseline(&options.baseline, &info, &rows)?;
         println!(
@@ -264,6 +235,7 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
         .cloned()
         .collect();
     let compared = compare(&old_info, &old_rows, &info, &this_rows, options.noise)?;
+    let scene_dir = options.out.join(&study.name);
     let ab = match against {
         Some((rev, a)) => {
             let a_instructions = count_instructions(&study.configurations, &scene_dir, &a)?;
@@ -294,22 +266,7 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
             .collect(),
     };
     if let Some(dir) = &options.history {
-        let against = match &ab {
-            Some(ab) => format!("A/B against {}", against::short(&ab.rev.commit)),
-            None => format!("baseline of {}", old_info.environment.git_commit),
-        };
-        let entries: Vec<history::Entry> = deciding
-            .iter()
-            .map(|row| row.history_entry(&info, &against))
-            .collect();
-        let path = history::append(dir, &info.environment, &entries)?;
-        if !options.quiet {
-            println!(
-                "history: {} row(s) appended in {}",
-                entries.len(),
-                path.display()
-            );
-        }
+        append_history(dir, options.quiet, &deciding, &info, &old_info, ab.as_ref())?;
     }
     Ok(
         match deciding.iter().any(|row| row.verdict == Verdict::Regressed) {
@@ -317,6 +274,90 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
             false => CheckOutcome::Passed,
         },
     )
+}
+
+/// Runs the manifest by this build (`this`), and by REV's (`against`) interleaved with
+/// it, then counts this build's instructions: what this check measured, as a
+/// baseline's description and its records. Failed runs end the check.
+fn measure(
+    study: &Study,
+    manifest_text: &str,
+    options: &CheckOptions,
+    this: &Program,
+    against: Option<&Program>,
+    manifest_hash: String,
+    environment: Environment,
+) -> anyhow::Result<(BaselineInfo, Vec<Record>)> {
+    let programs = match against {
+        Some(a) => vec![
+            a.clone(),
+            Program {
+                side: SIDE_B,
+                ..this.clone()
+            },
+        ],
+        None => vec![this.clone()],
+    };
+    let run_options = RunOptions {
+        out: options.out.clone(),
+        resume: false,
+        quiet: options.quiet,
+        programs,
+        calibrate: true,
+    };
+    let outcome = runner::run_study(study, manifest_text, &run_options)?;
+    if outcome.failed > 0 {
+        return Err(RunsFailed(format!(
+            "{} run(s) of the check failed; their rows in {} say why (status, error)",
+            outcome.failed,
+            outcome.results.display()
+        ))
+        .into());
+    }
+    let rows = records::read(&outcome.results)?;
+    let scene_dir = options.out.join(&study.name);
+    let instructions = count_instructions(&study.configurations, &scene_dir, this)?;
+    let info = BaselineInfo {
+        format: BASELINE_FORMAT,
+        recorded_utc: records::utc_now(),
+        manifest: options.manifest.display().to_string(),
+        manifest_hash,
+        inject_slowdown: options.slowdown.fraction,
+        inject_into: options.slowdown.into.map(|kind| kind.name().to_owned()),
+        calibrations: outcome.calibrations,
+        instructions,
+        environment,
+        boot_id: boot_id(),
+    };
+    Ok((info, rows))
+}
+
+/// Appends the verdicts that decided this check to the history in `dir`.
+fn append_history(
+    dir: &Path,
+    quiet: bool,
+    deciding: &[&Row],
+    info: &BaselineInfo,
+    old_info: &BaselineInfo,
+    ab: Option<&AbCheck>,
+) -> anyhow::Result<()> {
+    let against = match ab {
+        Some(ab) => format!("A/B against {}", against::short(&ab.rev.commit)),
+        None => format!("baseline of {}", old_info.environment.git_commit),
+    };
+    let entries: Vec<history::Entry> = deciding
+        .iter()
+        .map(|row| row.history_entry(info, &against))
+        .collect();
+    let path = history::append(dir, &info.environment, &entries)?;
+    if !quiet {
+        println!(
+            "history: {} row(s) appended in {}",
+            entries.len(),
+            path.display()
+        );
+    }
+    Ok(())
 }
 
 /// The `ab_side` of the runs of the build checked against, and of this build's.
