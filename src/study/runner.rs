@@ -136,27 +136,15 @@ pub fn run_study(
     let _held = open_results_folder(&dir, &note)?;
     let manifest_hash = manifest_hash(manifest_text);
     let build_id = build_id(&environment);
-    let (results, mut rows) = match options.resume {
-        true => match resumable(&dir, &manifest_hash, &build_id)? {
-            Some(found) => found,
-            None => bail!(
-                "nothing to resume in {}: no results file of this manifest and build; run without --resume",
-                dir.display()
-            ),
-        },
-        false => (new_results_path(&dir, &environment), Vec::new()),
-    };
+    let (results, mut rows) = kept_or_new(
+        &dir,
+        options.resume,
+        &manifest_hash,
+        &build_id,
+        &environment,
+    )?;
     let continue_with = resume_command(&study.manifest, &options.out);
-    let kept_note = |rows: &[Record]| {
-        let ok = rows.iter().filter(|r| r.status == STATUS_OK).count();
-        (ok > 0).then(|| {
-            format!(
-                "interrupted: {ok} run{} kept in {}; continue with {continue_with}",
-                if ok == 1 { "" } else { "s" },
-                results.display()
-            )
-        })
-    };
+    let kept_note = |rows: &[Record]| interrupted_note(rows, &results, &continue_with);
     *interrupt_note() = kept_note(&rows);
     let kept = rows.len();
     let done: BTreeSet<(String, u32)> = rows
@@ -191,17 +179,15 @@ pub fn run_study(
         timeout: study.timeout,
     };
     let started_utc = records::utc_now();
+    children.warm_up(
+        &options.programs,
+        &configurations,
+        &scene_files,
+        &warm,
+        study.warmups,
+        &progress,
+    );
     let mut calibrations = Vec::new();
-    for &c in &warm {
-        for program in &options.programs {
-            for _ in 0..study.warmups {
-                progress.set_message(format!("warm-up {}", configurations[c].key()));
-                // A warm-up that fails will fail again when measured, and be recorded then.
-                let _ = children.simulate(program, configurations[c], &scene_files[c]);
-                progress.inc(1);
-            }
-        }
-    }
     let (mut measured, mut failed) = (0, 0);
     for (index, &(rep, c)) in todo.iter().enumerate() {
         if options.calibrate && (index == 0 || todo[index - 1].0 != rep) {
@@ -225,12 +211,7 @@ pub fn run_study(
             study_started_utc: &started_utc,
         };
         for program in run_order(&options.programs, rep, c) {
-            let ended = children.simulate(program, configuration, &scene_files[c]);
-            let mut record = record_of(&context, ended, study.timeout);
-            record.ab_side = program.side.to_owned();
-            if let Some(commit) = &program.commit {
-                (record.git_commit, record.git_dirty) = (commit.clone(), false);
-            }
+            let record = children.measure(program, configuration, &scene_files[c], &context);
             if record.status == STATUS_OK {
                 measured += 1;
             } else {
@@ -258,6 +239,41 @@ pub fn run_study(
     })
 }
 
+/// The results file of a study and the rows it already holds: with `resume`, the file
+/// of this manifest and build in `dir` (an error if there is none); otherwise a new,
+/// unique file and no rows.
+fn kept_or_new(
+    dir: &Path,
+    resume: bool,
+    manifest_hash: &str,
+    build_id: &str,
+    environment: &Environment,
+) -> anyhow::Result<(PathBuf, Vec<Record>)> {
+    if !resume {
+        return Ok((new_results_path(dir, environment), Vec::new()));
+    }
+    match resumable(dir, manifest_hash, build_id)? {
+        Some(found) => Ok(found),
+        None => bail!(
+            "nothing to resume in {}: no results file of this manifest and build; run without --resume",
+            dir.display()
+        ),
+    }
+}
+
+/// What an interrupt prints: the measured runs kept in `results` and the command that
+/// continues the study; nothing while none is kept.
+fn interrupted_note(rows: &[Record], results: &Path, continue_with: &str) -> Option<String> {
+    let ok = rows.iter().filter(|r| r.status == STATUS_OK).count();
+    (ok > 0).then(|| {
+        format!(
+            "interrupted: {ok} run{} kept in {}; continue with {continue_with}",
+            if ok == 1 { "" } else { "s" },
+            results.display()
+        )
+    })
+}
+
 /// The programs' `simulate` and this program's `calibrate`, run as child processes
 /// under the study's timeout.
 struct Children {
@@ -280,6 +296,47 @@ impl Children {
             .args(configuration.simulate_args())
             .args(program.slowdown.simulate_args(configuration.backend));
         run_with_timeout(command, self.timeout)
+    }
+
+    /// `warmups` runs by every program of each configuration in `warm` (indices into
+    /// `configurations`, run on `scene_files`), unrecorded: a warm-up that fails will
+    /// fail again when measured, and be recorded then.
+    fn warm_up(
+        &self,
+        programs: &[Program],
+        configurations: &[&Configuration],
+        scene_files: &[PathBuf],
+        warm: &BTreeSet<usize>,
+        warmups: u32,
+        progress: &ProgressBar,
+    ) {
+        for &c in warm {
+            for program in programs {
+                for _ in 0..warmups {
+                    progress.set_message(format!("warm-up {}", configurations[c].key()));
+                    let _ = self.simulate(program, configurations[c], &scene_files[c]);
+                    progress.inc(1);
+                }
+            }
+        }
+    }
+
+    /// The row of one measured run of `configuration` by `program`, in `context`; a
+    /// run by the build checked against records that build's commit.
+    fn measure(
+        &self,
+        program: &Program,
+        configuration: &Configuration,
+        scene: &Path,
+        context: &RecordContext<'_>,
+    ) -> Record {
+        let ended = self.simulate(program, configuration, scene);
+        let mut record = record_of(context, ended, self.timeout);
+        record.ab_side = program.side.to_owned();
+        if let Some(commit) = &program.commit {
+            (record.git_commit, record.git_dirty) = (commit.clone(), false);
+        }
+        record
     }
 
     /// One measurement of the calibration workload.
