@@ -6,6 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::anyhow;
+use plotters::coord::combinators::WithKeyPoints;
 use plotters::prelude::*;
 
 use crate::report::analysis::{BackendScaling, Setup};
@@ -203,30 +204,7 @@ fn draw(figure: Figure, setup: &Setup, root: &Canvas<'_>) -> anyhow::Result<()> 
     workers.sort_unstable();
     workers.dedup();
     let max_workers = workers.last().copied().unwrap_or(1).max(2) as f64;
-    let values: Vec<f64> = backends
-        .iter()
-        .flat_map(|b| b.points.iter())
-        .flat_map(|p| {
-            let (low, mid, high) = figure.values(p);
-            [low, mid, high, figure.beside(p).unwrap_or(f64::NAN)]
-        })
-        .filter(|v| v.is_finite() && *v > 0.0)
-        .collect();
-    let (mut low, mut high) = values
-        .iter()
-        .fold((f64::INFINITY, 0.0_f64), |(lo, hi), &v| {
-            (lo.min(v), hi.max(v))
-        });
-    if !low.is_finite() {
-        (low, high) = (0.1, 1.0);
-    }
-    match figure {
-        // The ideal line reaches p; the 75% line and 100% must show.
-        Figure::Speedup => high = high.max(max_workers),
-        Figure::Efficiency => high = high.max(1.0),
-        _ => {}
-    }
-    let (y_low, y_high) = (low / 1.5, high * 1.5);
+    let (y_low, y_high) = y_range(figure, &backends, max_workers);
 
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
     let n = match setup.scaling {
@@ -266,6 +244,48 @@ fn draw(figure: Figure, setup: &Setup, root: &Canvas<'_>) -> anyhow::Result<()> 
         .y_label_formatter(&|y| tick_label(*y))
         .draw()
         .map_err(|e| anyhow!("{e}"))?;
+    draw_reference(&mut chart, figure, max_workers)?;
+    for backend in backends {
+        draw_backend(&mut chart, figure, backend)?;
+    }
+    draw_legend(&mut chart, figure.legend_position(), 15)
+}
+
+/// The value axis of a figure over `backends`: every drawn value, with room above and
+/// below (the ideal speedup up to `max_workers`, and 100% efficiency, always show).
+fn y_range(figure: Figure, backends: &[&BackendScaling], max_workers: f64) -> (f64, f64) {
+    let values: Vec<f64> = backends
+        .iter()
+        .flat_map(|b| b.points.iter())
+        .flat_map(|p| {
+            let (low, mid, high) = figure.values(p);
+            [low, mid, high, figure.beside(p).unwrap_or(f64::NAN)]
+        })
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .collect();
+    let (mut low, mut high) = values
+        .iter()
+        .fold((f64::INFINITY, 0.0_f64), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    if !low.is_finite() {
+        (low, high) = (0.1, 1.0);
+    }
+    match figure {
+        // The ideal line reaches p; the 75% line and 100% must show.
+        Figure::Speedup => high = high.max(max_workers),
+        Figure::Efficiency => high = high.max(1.0),
+        _ => {}
+    }
+    (low / 1.5, high * 1.5)
+}
+
+/// The reference line of a figure: the ideal speedup S = p, or 75% efficiency.
+fn draw_reference(
+    chart: &mut Chart2d<'_, '_>,
+    figure: Figure,
+    max_workers: f64,
+) -> anyhow::Result<()> {
     match figure {
         Figure::Speedup => {
             let ideal = [(1.0, 1.0), (max_workers, max_workers)];
@@ -285,67 +305,82 @@ fn draw(figure: Figure, setup: &Setup, root: &Canvas<'_>) -> anyhow::Result<()> 
         }
         _ => {}
     }
-    for backend in backends {
-        let colour = colour(&backend.backend);
-        let points: Vec<(f64, (f64, f64, f64))> = backend
-            .points
-            .iter()
-            .map(|p| (p.workers as f64, figure.values(p)))
-            .filter(|(_, (_, mid, _))| mid.is_finite() && *mid > 0.0)
-            .collect();
+    Ok(())
+}
+
+/// One backend's series: its values with their ranges, and the values drawn beside
+/// them (dashed), in the backend's colour.
+fn draw_backend(
+    chart: &mut Chart2d<'_, '_>,
+    figure: Figure,
+    backend: &BackendScaling,
+) -> anyhow::Result<()> {
+    let colour = colour(&backend.backend);
+    let points: Vec<(f64, (f64, f64, f64))> = backend
+        .points
+        .iter()
+        .map(|p| (p.workers as f64, figure.values(p)))
+        .filter(|(_, (_, mid, _))| mid.is_finite() && *mid > 0.0)
+        .collect();
+    chart
+        .draw_series(LineSeries::new(
+            points.iter().map(|&(x, (_, mid, _))| (x, mid)),
+            colour.stroke_width(2),
+        ))
+        .map_err(|e| anyhow!("{e}"))?
+        .label(match figure {
+            Figure::Drawing => format!("{}: frames/s with drawing", backend.backend),
+            _ => backend.backend.clone(),
+        })
+        .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2)));
+    let beside: Vec<(f64, f64)> = backend
+        .points
+        .iter()
+        .filter_map(|p| Some((p.workers as f64, figure.beside(p)?)))
+        .filter(|(_, value)| value.is_finite() && *value > 0.0)
+        .collect();
+    if !beside.is_empty() {
         chart
-            .draw_series(LineSeries::new(
-                points.iter().map(|&(x, (_, mid, _))| (x, mid)),
+            .draw_series(DashedLineSeries::new(
+                beside.iter().copied(),
+                8,
+                6,
                 colour.stroke_width(2),
             ))
             .map_err(|e| anyhow!("{e}"))?
-            .label(match figure {
-                Figure::Drawing => format!("{}: frames/s with drawing", backend.backend),
-                _ => backend.backend.clone(),
-            })
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2)));
-        let beside: Vec<(f64, f64)> = backend
-            .points
-            .iter()
-            .filter_map(|p| Some((p.workers as f64, figure.beside(p)?)))
-            .filter(|(_, value)| value.is_finite() && *value > 0.0)
-            .collect();
-        if !beside.is_empty() {
-            chart
-                .draw_series(DashedLineSeries::new(
-                    beside.iter().copied(),
-                    8,
-                    6,
-                    colour.stroke_width(2),
-                ))
-                .map_err(|e| anyhow!("{e}"))?
-                .label(format!("{}: steps/s without drawing", backend.backend))
-                .legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 8, y)], colour.stroke_width(2))
-                });
-            chart
-                .draw_series(
-                    beside
-                        .iter()
-                        .map(|&point| Circle::new(point, 4, colour.stroke_width(2))),
-                )
-                .map_err(|e| anyhow!("{e}"))?;
-        }
-        chart
-            .draw_series(points.iter().map(|&(x, (lo, mid, hi))| {
-                ErrorBar::new_vertical(x, lo, mid, hi, colour.filled(), 8)
-            }))
-            .map_err(|e| anyhow!("{e}"))?;
+            .label(format!("{}: steps/s without drawing", backend.backend))
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 8, y)], colour.stroke_width(2)));
         chart
             .draw_series(
-                points
+                beside
                     .iter()
-                    .map(|&(x, (_, mid, _))| Circle::new((x, mid), 4, colour.filled())),
+                    .map(|&point| Circle::new(point, 4, colour.stroke_width(2))),
             )
             .map_err(|e| anyhow!("{e}"))?;
     }
-    draw_legend(&mut chart, figure.legend_position(), 15)
+    chart
+        .draw_series(
+            points.iter().map(|&(x, (lo, mid, hi))| {
+                ErrorBar::new_vertical(x, lo, mid, hi, colour.filled(), 8)
+            }),
+        )
+        .map_err(|e| anyhow!("{e}"))?;
+    chart
+        .draw_series(
+            points
+                .iter()
+                .map(|&(x, (_, mid, _))| Circle::new((x, mid), 4, colour.filled())),
+        )
+        .map_err(|e| anyhow!("{e}"))?;
+    Ok(())
 }
+
+/// The chart of a scaling figure: log workers against a log value.
+type Chart2d<'a, 'b> = ChartContext<
+    'a,
+    BitMapBackend<'b>,
+    Cartesian2d<WithKeyPoints<LogCoord<f64>>, WithKeyPoints<LogCoord<f64>>>,
+>;
 
 #[cfg(test)]
 mod tests {
