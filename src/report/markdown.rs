@@ -291,7 +291,12 @@ fn setup_section(out: &mut String, setup: &Setup) {
             "Every run ended in the same state (one `state_hash`).\n"
         );
     }
-    // Cuadro 1: workers × seconds per backend.
+    seconds_table(out, setup);
+    speedup_table(out, setup);
+}
+
+/// The seed's Cuadro 1: workers × median seconds per run of each backend.
+fn seconds_table(out: &mut String, setup: &Setup) {
     let workers = setup.worker_counts();
     let _ = writeln!(out, "### Seconds per run (the seed's Cuadro 1)\n");
     let _ = write!(out, "| workers |");
@@ -329,7 +334,11 @@ fn setup_section(out: &mut String, setup: &Setup) {
         out,
         "\nMedian of the repetitions, with their min–max; ⚠ marks oversubscribed runs.\n"
     );
+}
 
+/// Speedup, efficiency, Karp–Flatt and steps per second of every backend and worker
+/// count, what each speedup is against, and the Amdahl fits.
+fn speedup_table(out: &mut String, setup: &Setup) {
     let _ = writeln!(out, "### Speedup, efficiency and FPS\n");
     if setup.scaling == Scaling::Weak {
         let _ = writeln!(
@@ -508,113 +517,121 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
          second (every run simulates the same time, so it compares methods at equal \
          physics); particle-steps/s counts each method's own steps.\n"
     );
-    let cell = |value: f64, text: String| {
-        if value.is_finite() {
-            text
-        } else {
-            "—".to_owned()
-        }
-    };
     for group in &section.groups {
         let _ = writeln!(out, "### Packing {:.2}\n", group.packing);
         let _ = writeln!(
             out,
             "| method | dt | v_rms·dt/r | wall s | sim time / s | particle-steps/s | missed fraction | max overlap | max wall penetration | Z | Z error | ω | ω error |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
         );
-        // One row per point; the event method has no step (exact times), misses nothing
-        // and overlaps only by rounding; the reference has no error of its own.
-        let row = |out: &mut String, p: &AccuracyPoint, is_reference: bool| {
-            let is_event = p.method == "event";
-            let missed = match p.missed_fraction {
-                _ if is_event => "0".to_owned(),
-                0.0 => "0".to_owned(),
-                m => cell(m, format!("{m:.2e}")),
-            };
-            let missed = bold_if(p.failed(), missed);
-            let method = match p.collapse_time {
-                t if t.is_finite() => format!(
-                    "{}, **collapsed at t = {t:.4}**",
-                    method_label(&p.method, p.tc)
-                ),
-                _ => method_label(&p.method, p.tc),
-            };
-            let (dt, step, overlap) = if is_event {
-                (
-                    "exact".to_owned(),
-                    "—".to_owned(),
-                    format!("{:.1e}", p.max_overlap),
-                )
-            } else {
-                (
-                    p.dt.to_string(),
-                    cell(p.step_over_radius, format!("{:.3}", p.step_over_radius)),
-                    format!("{:.3}", p.max_overlap),
-                )
-            };
-            let wall = bold_if(
-                p.deep_in_walls(),
-                cell(
-                    p.max_wall_penetration,
-                    format!("{:.3}", p.max_wall_penetration),
-                ),
-            );
-            let error = |value: f64| {
-                if is_reference {
-                    "reference".to_owned()
-                } else {
-                    cell(value, format!("{:+.2}%", 100.0 * value))
-                }
-            };
-            let _ = writeln!(
-                out,
-                "| {method} | {dt} | {step} | {:.4} | {:.1} | {:.3e} | {missed} | {overlap} | {wall} | {:.4} | {} | {:.4} | {} |",
-                p.wall_s,
-                p.sim_time_per_s,
-                p.particle_steps_per_s,
-                p.compressibility_z,
-                error(p.z_error),
-                p.collision_rate,
-                error(p.rate_error),
-            );
-        };
         if let Some(reference) = &group.reference {
-            row(out, reference, true);
+            accuracy_row(out, reference, true);
         }
         for point in group.events.iter().chain(&group.steps) {
-            row(out, point, false);
+            accuracy_row(out, point, false);
         }
         let _ = writeln!(out);
-        match group.steps.iter().rev().find(|p| p.failed()) {
-            Some(worst_ok) => {
-                let largest_ok = group
-                    .steps
-                    .iter()
-                    .find(|p| p.missed_fraction.is_finite() && !p.failed());
-                let _ = writeln!(
-                    out,
-                    "The step method fails at v_rms·dt/r ≥ {:.3}{}.\n",
-                    worst_ok.step_over_radius,
-                    largest_ok.map_or_else(String::new, |p| format!(
-                        "; the largest passing step is v_rms·dt/r = {:.3} (Z error {:+.2}%, {:.1}× the event method's speed)",
-                        p.step_over_radius,
-                        100.0 * p.z_error,
-                        group
-                            .reference
-                            .as_ref()
-                            .map_or(f64::NAN, |r| p.sim_time_per_s / r.sim_time_per_s)
-                    ))
-                );
-            }
-            None => {
-                let _ = writeln!(out, "No measured step fails here.\n");
-            }
-        }
+        failure_line(out, group);
     }
     for figure in &section.figures {
         let _ = writeln!(out, "![{figure}]({figure})\n");
     }
     if !section.cooling.is_empty() {
         cooling_section(out, &section.cooling);
+    }
+}
+
+/// One row of an accuracy table. The event method has no step (exact times), misses
+/// nothing and overlaps only by rounding; the reference has no error of its own.
+fn accuracy_row(out: &mut String, p: &AccuracyPoint, is_reference: bool) {
+    let is_event = p.method == "event";
+    let missed = match p.missed_fraction {
+        _ if is_event => "0".to_owned(),
+        0.0 => "0".to_owned(),
+        m => finite_or_dash(m, format!("{m:.2e}")),
+    };
+    let missed = bold_if(p.failed(), missed);
+    let method = match p.collapse_time {
+        t if t.is_finite() => format!(
+            "{}, **collapsed at t = {t:.4}**",
+            method_label(&p.method, p.tc)
+        ),
+        _ => method_label(&p.method, p.tc),
+    };
+    let (dt, step, overlap) = if is_event {
+        (
+            "exact".to_owned(),
+            "—".to_owned(),
+            format!("{:.1e}", p.max_overlap),
+        )
+    } else {
+        (
+            p.dt.to_string(),
+            finite_or_dash(p.step_over_radius, format!("{:.3}", p.step_over_radius)),
+            format!("{:.3}", p.max_overlap),
+        )
+    };
+    let wall = bold_if(
+        p.deep_in_walls(),
+        finite_or_dash(
+            p.max_wall_penetration,
+            format!("{:.3}", p.max_wall_penetration),
+        ),
+    );
+    let error = |value: f64| {
+        if is_reference {
+            "reference".to_owned()
+        } else {
+            finite_or_dash(value, format!("{:+.2}%", 100.0 * value))
+        }
+    };
+    let _ = writeln!(
+        out,
+        "| {method} | {dt} | {step} | {:.4} | {:.1} | {:.3e} | {missed} | {overlap} | {wall} | {:.4} | {} | {:.4} | {} |",
+        p.wall_s,
+        p.sim_time_per_s,
+        p.particle_steps_per_s,
+        p.compressibility_z,
+        error(p.z_error),
+        p.collision_rate,
+        error(p.rate_error),
+    );
+}
+
+/// Where the step method starts failing in a group, and its largest passing step.
+fn failure_line(out: &mut String, group: &PackingGroup) {
+    match group.steps.iter().rev().find(|p| p.failed()) {
+        Some(worst_ok) => {
+            let largest_ok = group
+                .steps
+                .iter()
+                .find(|p| p.missed_fraction.is_finite() && !p.failed());
+            let _ = writeln!(
+                out,
+                "The step method fails at v_rms·dt/r ≥ {:.3}{}.\n",
+                worst_ok.step_over_radius,
+                largest_ok.map_or_else(String::new, |p| format!(
+                    "; the largest passing step is v_rms·dt/r = {:.3} (Z error {:+.2}%, {:.1}× the event method's speed)",
+                    p.step_over_radius,
+                    100.0 * p.z_error,
+                    group
+                        .reference
+                        .as_ref()
+                        .map_or(f64::NAN, |r| p.sim_time_per_s / r.sim_time_per_s)
+                ))
+            );
+        }
+        None => {
+            let _ = writeln!(out, "No measured step fails here.\n");
+        }
+    }
+}
+
+/// `text`, or a dash where `value` is not finite.
+fn finite_or_dash(value: f64, text: String) -> String {
+    if value.is_finite() {
+        text
+    } else {
+        "—".to_owned()
     }
 }
 
