@@ -14,7 +14,7 @@ use crate::run::spec::{Method, Observe, PreparedRun, RunSpec};
 use crate::sim::Particles;
 use crate::sim::Stepper;
 use crate::sim::event::EventSim;
-use crate::sim::observe::{MissedCollisions, observe};
+use crate::sim::observe::{MissedCollisions, observe, temperature};
 
 /// Builds the scene, runs it on one thread with its method, and measures the run
 /// stage by stage. Observing (the temperature curve, missed collisions) and drawing
@@ -156,9 +156,4 @@ impl Curve {
             points.push([time, temperature(particles)]);
         });
     }
-}
-
-/// Kinetic energy per disk (k_B = 1 in 2D).
-fn temperature(particles: &Particles) -> f64 {
-    observe(particles).kinetic_energy / particles.len().max(1) as f64
 }

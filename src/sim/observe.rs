@@ -37,6 +37,11 @@ pub fn observe(particles: &Particles) -> Observables {
     }
 }
 
+/// The temperature of a state in 2D (k_B = 1): kinetic energy per disk.
+pub fn temperature(particles: &Particles) -> f64 {
+    observe(particles).kinetic_energy / particles.len().max(1) as f64
+}
+
 /// A run's thermodynamics in 2D (k_B = 1): the mean temperature T̄ (kinetic energy per
 /// disk), the pressure from the collision virial and the compressibility factor Z.
 #[derive(Clone, Copy, Debug, PartialEq)]
