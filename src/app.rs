@@ -24,7 +24,9 @@ use crate::run::summary::RunSummary;
 use crate::study::records::{self, Record, STATUS_OK};
 use crate::study::runner::{Calibration, RunOptions, Slowdown};
 use crate::study::{manifest, runner};
-use crate::system::output::{check_output_file, write_atomically, write_state_csv};
+use crate::system::output::{
+    check_output_file, check_output_folder, write_atomically, write_state_csv,
+};
 use crate::view::render;
 use crate::view::window::ViewOptions;
 use crate::{check, view};
@@ -121,6 +123,11 @@ fn render_scene(args: &RenderArgs) -> anyhow::Result<()> {
 }
 
 fn view_scene(args: &ViewArgs) -> anyhow::Result<()> {
+    for (flag, path) in [("--stats", &args.stats), ("--screenshot", &args.screenshot)] {
+        if let Some(path) = path {
+            check_output_file(path, flag)?;
+        }
+    }
     let spec = scene_file::load(&args.scene, &args.overrides)?;
     if spec.method.draw {
         bail!(
@@ -178,7 +185,7 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
             Path::new("reports").join(study)
         }
     };
-    report_into(&records, &args.path, &out)
+    report_into(&records, &args.path, &out, "--out")
 }
 
 /// The report of a check history folder: its figure and table in `--out` (default
@@ -207,12 +214,12 @@ fn write_history_report(args: &ReportArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Writes the report of `records` (read from `source`) into the folder `out`: report.md
-/// and its figures; prints where.
-fn report_into(records: &[Record], source: &Path, out: &Path) -> anyhow::Result<()> {
+/// Writes the report of `records` (read from `source`) into the folder `out`, which the
+/// option `flag` chose: report.md and its figures; prints where.
+fn report_into(records: &[Record], source: &Path, out: &Path, flag: &str) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| {
         format!(
-            "cannot create the report folder {}; choose another with --out",
+            "cannot create the report folder {}; choose another with {flag}",
             out.display()
         )
     })?;
@@ -271,6 +278,11 @@ fn report_into(records: &[Record], source: &Path, out: &Path) -> anyhow::Result<
 
 fn run_study(args: &RunArgs) -> anyhow::Result<()> {
     let (study, text) = manifest::load(&args.manifest)?;
+    let reports = args.reports.join(&study.name);
+    // Refused before the first run, not after the last.
+    if !args.no_report {
+        check_output_folder(&reports, "--reports")?;
+    }
     let options = RunOptions {
         out: args.out.clone(),
         resume: args.resume,
@@ -301,7 +313,7 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
             );
         } else {
             println!();
-            report_into(&records, &outcome.results, &args.reports.join(&study.name))?;
+            report_into(&records, &outcome.results, &reports, "--reports")?;
         }
     }
     if outcome.failed > 0 {

@@ -198,6 +198,15 @@ fn output_paths_that_cannot_be_written_are_refused_first_in_words_once() {
             vec!["simulate", scene, "--dump", in_file.to_str().unwrap()],
             &["--dump", "is a file, not a folder"],
         ),
+        // Checked before a window opens (and so also where there is no display).
+        (
+            vec!["view", scene, "--stats", in_file.to_str().unwrap()],
+            &["--stats", "is a file, not a folder"],
+        ),
+        (
+            vec!["view", scene, "--screenshot", folder],
+            &["--screenshot", "is a folder"],
+        ),
     ];
     for (args, fragments) in &cases {
         let stderr = refused(args);
@@ -209,6 +218,31 @@ fn output_paths_that_cannot_be_written_are_refused_first_in_words_once() {
             );
         }
     }
+    // A study's report folder is checked before its first run, not after its last.
+    let text = format!(
+        "name = \"tiny\"\n[backends]\nserial = true\n{}",
+        inline_scene("gas")
+    );
+    let manifest = scene_file(dir.path(), "tiny.toml", &text);
+    let out = dir.path().join("results");
+    let reports = file.join("reports");
+    let stderr = refused(&[
+        "run",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--reports",
+        reports.to_str().unwrap(),
+    ]);
+    assert_in_words(&stderr);
+    assert!(
+        stderr.contains("--reports") && stderr.contains("is a file, not a folder"),
+        "{stderr}"
+    );
+    assert!(
+        !out.exists(),
+        "the study ran before refusing its report folder"
+    );
     // A folder the user may not write into (root may write anywhere: skip the case).
     let locked = dir.path().join("locked");
     std::fs::create_dir(&locked).unwrap();
@@ -218,6 +252,28 @@ fn output_paths_that_cannot_be_written_are_refused_first_in_words_once() {
         let stderr = refused(&["render", scene, "--png", target.to_str().unwrap()]);
         assert_in_words(&stderr);
         assert!(stderr.contains("Permission denied"), "{stderr}");
+    }
+}
+
+#[test]
+fn unreadable_scenes_and_manifests_are_named_with_their_reason_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("missing.toml");
+    let missing = missing.to_str().unwrap();
+    let folder = dir.path().to_str().unwrap();
+    let cases: [(&[&str], &str); 4] = [
+        (&["simulate", missing], "No such file or directory"),
+        (&["simulate", folder], "Is a directory"),
+        (&["run", missing], "No such file or directory"),
+        (&["run", folder], "Is a directory"),
+    ];
+    for (args, reason) in cases {
+        let stderr = refused(args);
+        assert_in_words(&stderr);
+        assert!(
+            stderr.contains(args[1]) && stderr.contains(reason) && !stderr.contains("os error"),
+            "{args:?}: {stderr}"
+        );
     }
 }
 

@@ -21,14 +21,14 @@ use crate::sim::scene::{
     check_periodic_box,
 };
 use crate::sim::{Boundary, Broadphase, Disk, Domain, Particles, Physics, Scene};
+use crate::system::output::io_reason;
 
 #[derive(Debug, thiserror::Error)]
 pub enum SceneFileError {
-    #[error("cannot read scene file {path}: {source}; check the path")]
-    Read {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    /// The reason is kept as words, not as a source error: shown as a chain, the
+    /// source would repeat it.
+    #[error("cannot read scene file {path}: {reason}; check the path")]
+    Read { path: PathBuf, reason: String },
     #[error(
         "{path}:{line}: {message}; see docs/guide.md, Scene files, for the keys and values a scene accepts"
     )]
@@ -48,9 +48,9 @@ pub enum SceneFileError {
 
 /// Reads and validates a scene file, applying overrides.
 pub fn load(path: &Path, overrides: &Overrides) -> Result<RunSpec, SceneFileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| SceneFileError::Read {
+    let text = std::fs::read_to_string(path).map_err(|err| SceneFileError::Read {
         path: path.to_owned(),
-        source,
+        reason: io_reason(&err),
     })?;
     parse(path, &text, overrides)
 }

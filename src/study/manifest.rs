@@ -18,6 +18,7 @@ use crate::run::overrides::{Overrides, SweepLists, SweptList};
 use crate::run::scene_file;
 use crate::run::spec::{Footprint, RunSpec, SceneSource};
 use crate::study::names::check_name;
+use crate::system::output::io_reason;
 
 /// A validated study: what to run, how often, and in which order.
 #[derive(Clone, Debug, PartialEq)]
@@ -173,8 +174,9 @@ struct RawBackends {
 pub fn load(path: &Path) -> anyhow::Result<(Study, String)> {
     let text = std::fs::read_to_string(path).map_err(|err| {
         anyhow::anyhow!(
-            "cannot read manifest {}: {err}; check the path",
-            path.display()
+            "cannot read manifest {}: {}; check the path",
+            path.display(),
+            io_reason(&err)
         )
     })?;
     Ok((parse(path, &text, &Machine::this())?, text))

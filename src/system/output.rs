@@ -139,6 +139,41 @@ pub fn check_output_file(path: &Path, flag: &str) -> anyhow::Result<()> {
     }
 }
 
+/// Checks, before any work, that a folder can be made (or is already) at `dir`, without
+/// making it: the nearest part of the path that exists is a folder this process may
+/// write into. `flag` names where the path came from.
+pub fn check_output_folder(dir: &Path, flag: &str) -> anyhow::Result<()> {
+    let existing = dir
+        .ancestors()
+        .map(|part| match part.as_os_str().is_empty() {
+            true => Path::new("."),
+            false => part,
+        })
+        .find(|part| part.exists())
+        .unwrap_or(Path::new("."));
+    if !existing.is_dir() {
+        bail!(
+            "{flag} {}: {} is a file, not a folder; choose another folder",
+            dir.display(),
+            existing.display()
+        );
+    }
+    match tempfile::Builder::new()
+        .prefix(TEMP_PREFIX)
+        .suffix(TEMP_SUFFIX)
+        .tempfile_in(existing)
+    {
+        // The probe file is removed when dropped.
+        Ok(_) => Ok(()),
+        Err(err) => bail!(
+            "{flag} {}: cannot write in the folder {} ({}); choose another folder",
+            dir.display(),
+            existing.display(),
+            io_reason(&err)
+        ),
+    }
+}
+
 /// An I/O error's reason in words, without the OS error number.
 pub fn io_reason(err: &std::io::Error) -> String {
     without_os_code(err.to_string())
