@@ -343,13 +343,22 @@ fn results_of_several_studies_are_shown_apart_and_never_reported_as_one() {
 }
 
 #[test]
-fn each_exit_code_of_the_table_is_the_one_stated_in_help() {
+fn each_exit_code_of_the_table_is_the_one_stated_in_help_and_the_docs() {
     let help = text(&collide(&["--help"]).stdout);
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let docs = ["README.md", "docs/guide.md"].map(|doc| {
+        let text = std::fs::read_to_string(repo.join(doc)).unwrap();
+        (doc, text)
+    });
     for code in collide::exit::ALL {
-        assert!(
-            help.contains(&format!("{:<4} {}", code.code, code.meaning)),
-            "{help}"
-        );
+        let line = format!("{:<4} {}", code.code, code.meaning);
+        assert!(help.contains(&line), "{help}");
+        for (doc, text) in &docs {
+            assert!(
+                text.lines().any(|l| l == line),
+                "{doc} does not state the exit code table as `collide --help` does: `{line}`"
+            );
+        }
     }
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("results");
