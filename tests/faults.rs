@@ -201,39 +201,50 @@ fn resume_passes_over_damaged_files_and_check_refuses_a_damaged_baseline() {
 
 #[test]
 fn a_hard_kill_of_collide_run_takes_its_measurement_child_with_it() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("results");
-    // Ten million steps: about a minute, unless its parent's death stops it.
-    let path = manifest(
-        dir.path(),
-        "repetitions = 1\nwarmups = 0\n[sweep]\nsteps = [10000000]\n[backends]\nserial = true\n",
-    );
-    let mut study = study_command(&path, &out)
-        .arg("--quiet")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let scene = dir.path().join("scene.toml");
-    let scene = scene.to_str().unwrap();
-    let started = Instant::now();
-    while processes_mentioning(scene).is_empty() {
-        assert!(
-            started.elapsed() < Duration::from_secs(20),
-            "no child started"
-        );
-        std::thread::sleep(Duration::from_millis(20));
+    // The processes that name the scene once the run is under way: the child `collide
+    // simulate`, and with MPI also its launcher and the launcher's two ranks.
+    let mut backends = vec![("serial = true", 1)];
+    if cfg!(feature = "mpi") {
+        backends.push(("mpi = [2]", 4));
     }
-    study.kill().unwrap(); // SIGKILL: no handler runs.
-    study.wait().unwrap();
-    let killed = Instant::now();
-    while !processes_mentioning(scene).is_empty() {
-        assert!(
-            killed.elapsed() < Duration::from_secs(5),
-            "the child outlived its parent: {:?}",
-            processes_mentioning(scene)
+    for (backend, n_processes) in backends {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("results");
+        // Ten million steps: about a minute, unless its parent's death stops it.
+        let path = manifest(
+            dir.path(),
+            &format!(
+                "repetitions = 1\nwarmups = 0\n[sweep]\nsteps = [10000000]\n[backends]\n{backend}\n"
+            ),
         );
-        std::thread::sleep(Duration::from_millis(50));
+        let mut study = study_command(&path, &out)
+            .arg("--quiet")
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let scene = dir.path().join("scene.toml");
+        let scene = scene.to_str().unwrap();
+        let started = Instant::now();
+        while processes_mentioning(scene).len() < n_processes {
+            assert!(
+                started.elapsed() < Duration::from_secs(20),
+                "{backend}: not all of the run's {n_processes} processes started: {:?}",
+                processes_mentioning(scene)
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        study.kill().unwrap(); // SIGKILL: no handler runs.
+        study.wait().unwrap();
+        let killed = Instant::now();
+        while !processes_mentioning(scene).is_empty() {
+            assert!(
+                killed.elapsed() < Duration::from_secs(5),
+                "{backend}: processes outlived collide run: {:?}",
+                processes_mentioning(scene)
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
     }
 }
 
