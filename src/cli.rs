@@ -277,7 +277,7 @@ pub struct SimulateArgs {
     /// MPI ranks to launch (with --backend mpi; default under mpirun: its world size).
     #[arg(long, value_parser = parse_workers)]
     pub ranks: Option<NonZeroUsize>,
-    /// Allow more than 8 threads or ranks per logical core (refused otherwise: such a
+    /// Allow more than 8 threads or ranks per usable CPU (refused otherwise: such a
     /// run measures the scheduler rather than the simulation).
     #[arg(long)]
     pub oversubscribe: bool,

@@ -599,6 +599,22 @@ fn under_taskset_workers_default_to_the_allowed_cpus_and_more_are_oversubscribed
     assert_eq!(default["oversubscribed"], false, "{default}");
     let two = summary(&["--threads", "2"]);
     assert_eq!(two["oversubscribed"], true, "{two}");
+    // The ceiling on workers counts the allowed CPUs too: 8 threads on 1 CPU run, 9 are
+    // refused before anything runs.
+    summary(&["--threads", "8"]);
+    let refused = Command::new("taskset")
+        .args(["-c", "0", env!("CARGO_BIN_EXE_collide")])
+        .args(["simulate", "experiments/scenes/seed-1000.toml"])
+        .args(["--backend", "rayon", "--threads", "9"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("taskset (util-linux) runs");
+    let stderr = text(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("more than 8 per CPU this process may use (1 here: at most 8)"),
+        "{stderr}"
+    );
 
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("results");

@@ -314,7 +314,7 @@ fn runs_too_large_for_the_machine_are_refused_before_allocating() {
     assert!(!out.exists(), "the study ran before refusing");
     // Every MPI rank holds all the disks: ranks multiply the estimate.
     let machine = Machine {
-        logical_cores: 64,
+        usable_cpus: 64,
         memory_bytes: 8_000_000_000,
     };
     let ranks = format!(
@@ -365,7 +365,7 @@ fn worker_counts_above_the_ceiling_are_refused_unless_insisted_on() {
 
     // In a manifest, against a posed machine of 2 cores.
     let machine = Machine {
-        logical_cores: 2,
+        usable_cpus: 2,
         memory_bytes: 1 << 34,
     };
     let manifest = |backends: &str| {

@@ -1,10 +1,10 @@
 //! What a run may ask of this machine, checked before anything runs: memory for its
-//! disks ([`crate::run::spec::Footprint`]) and a ceiling on workers per logical core. The
+//! disks ([`crate::run::spec::Footprint`]) and a ceiling on workers per usable CPU. The
 //! checks are pure functions of a [`Machine`], so that tests can pose any machine.
 
 use crate::run::spec::Footprint;
 
-/// Above this many workers (threads or ranks) per logical core a run is refused unless
+/// Above this many workers (threads or ranks) per CPU this process may use a run is refused unless
 /// the user insists (`--oversubscribe`, or `oversubscribe = true` in a manifest's
 /// `[backends]`): beyond it a run measures the scheduler, not the simulation.
 pub const MAX_WORKERS_PER_CORE: usize = 8;
@@ -15,7 +15,8 @@ pub const LONG_PLACEMENT_S: f64 = 10.0;
 /// The resources runs are checked against.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Machine {
-    pub logical_cores: usize,
+    /// CPUs this process may run on (its affinity mask and quota).
+    pub usable_cpus: usize,
     /// Memory this process may use: the machine's, or its control group's limit if
     /// lower; 0 when unknown (nothing is then refused for memory).
     pub memory_bytes: u64,
@@ -29,14 +30,14 @@ impl Machine {
             .filter(|&limit| total == 0 || limit < total)
             .unwrap_or(total);
         Machine {
-            logical_cores: crate::system::machine::machine_cores(),
+            usable_cpus: crate::system::machine::usable_cpus(),
             memory_bytes,
         }
     }
 
     /// The most workers a run may use without insisting.
     pub fn max_workers(&self) -> usize {
-        MAX_WORKERS_PER_CORE * self.logical_cores.max(1)
+        MAX_WORKERS_PER_CORE * self.usable_cpus.max(1)
     }
 }
 
@@ -49,7 +50,7 @@ pub struct WorkerSource<'a> {
     pub insist: &'a str,
 }
 
-/// `Ok` when `workers` is within [`MAX_WORKERS_PER_CORE`] per logical core (or the user
+/// `Ok` when `workers` is within [`MAX_WORKERS_PER_CORE`] per usable CPU (or the user
 /// insists); otherwise what was wrong and the two ways out.
 pub fn check_workers(
     workers: usize,
@@ -62,10 +63,10 @@ pub fn check_workers(
         return Ok(());
     }
     Err(format!(
-        "{} asks for {workers} workers, more than {MAX_WORKERS_PER_CORE} per logical core \
-         ({} cores here: at most {ceiling}), where a run measures the scheduler rather than \
+        "{} asks for {workers} workers, more than {MAX_WORKERS_PER_CORE} per CPU \
+         this process may use ({} here: at most {ceiling}), where a run measures the scheduler rather than \
          the simulation; lower the count, or {} to run it anyway",
-        source.field, machine.logical_cores, source.insist
+        source.field, machine.usable_cpus, source.insist
     ))
 }
 
@@ -135,7 +136,7 @@ mod tests {
     use crate::run::spec::{BASE_BYTES, EVENT_BYTES_PER_DISK, STEP_BYTES_PER_DISK};
 
     const LAPTOP: Machine = Machine {
-        logical_cores: 2,
+        usable_cpus: 2,
         memory_bytes: 24_000_000_000,
     };
 

@@ -25,7 +25,7 @@ pub struct RunSummary {
     pub threads: usize,
     /// MPI processes (1 for serial and rayon).
     pub ranks: usize,
-    /// True when threads × ranks exceeds this machine's logical cores.
+    /// True when threads × ranks exceeds the CPUs the run's process may use.
     pub oversubscribed: bool,
     pub boundary: String,
     pub broadphase: String,

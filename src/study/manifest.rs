@@ -571,7 +571,7 @@ mod tests {
 
     /// A machine with room for every test manifest here.
     const MACHINE: Machine = Machine {
-        logical_cores: 2,
+        usable_cpus: 2,
         memory_bytes: 1 << 34,
     };
 
