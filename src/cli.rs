@@ -144,7 +144,7 @@ pub struct CheckArgs {
     /// Relative change that counts as noise: a configuration regressed only when the
     /// whole confidence interval of its time ratio lies above 1 + this (the default is
     /// chosen from A/A and injected-slowdown checks: docs/ci-check.md, Measured).
-    #[arg(long, value_name = "FRACTION", default_value_t = 0.05, value_parser = parse_fraction)]
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.03, value_parser = parse_fraction)]
     pub noise: f64,
     /// Also build REV (any git revision; default: the commit that recorded the
     /// baseline) and run both builds interleaved: the paired ratios of this build to

@@ -67,9 +67,9 @@ const BASELINE_RECORDS: &str = "records.parquet";
 /// Confidence of the bootstrap interval.
 const CONFIDENCE: f64 = 0.95;
 /// An instruction count counts as changed beyond this fraction, on every backend: about
-/// 10 times the largest difference measured between two builds of one commit in 21 A/A
-/// checks on a busy machine (2.3 × 10⁻⁴ serial, 1.0 × 10⁻³ rayon, whose idle threads
-/// spin, 3.2 × 10⁻⁴ for MPI rank 0's own code; docs/ci-check.md).
+/// 10 times the largest difference measured between two builds of one commit in 20 A/A
+/// checks (1.7 × 10⁻⁴ serial, 1.0 × 10⁻³ rayon, whose idle threads spin, 10⁻⁵ for MPI
+/// rank 0's own code; docs/ci-check.md).
 const INSTRUCTION_NOISE: f64 = 0.01;
 /// The unit of the instruction-count row.
 const INSTRUCTIONS: &str = "instructions";
