@@ -111,13 +111,8 @@ pub fn check_output_file(path: &Path, flag: &str) -> anyhow::Result<()> {
         _ => Path::new("."),
     };
     match std::fs::metadata(dir) {
-        // The probe file is removed when dropped.
-        Ok(meta) if meta.is_dir() => match tempfile::Builder::new()
-            .prefix(TEMP_PREFIX)
-            .suffix(TEMP_SUFFIX)
-            .tempfile_in(dir)
-        {
-            Ok(_) => Ok(()),
+        Ok(meta) if meta.is_dir() => match probe_write(dir) {
+            Ok(()) => Ok(()),
             Err(err) => bail!(
                 "{flag} {}: cannot write in the folder {} ({}); choose another path",
                 path.display(),
@@ -139,6 +134,16 @@ pub fn check_output_file(path: &Path, flag: &str) -> anyhow::Result<()> {
     }
 }
 
+/// Whether this process may create a file in the folder `dir`: a probe file, removed
+/// again at once (when dropped), named as the leftovers of writers are.
+fn probe_write(dir: &Path) -> std::io::Result<()> {
+    tempfile::Builder::new()
+        .prefix(TEMP_PREFIX)
+        .suffix(TEMP_SUFFIX)
+        .tempfile_in(dir)
+        .map(drop)
+}
+
 /// Checks, before any work, that a folder can be made (or is already) at `dir`, without
 /// making it: the nearest part of the path that exists is a folder this process may
 /// write into. `flag` names where the path came from.
@@ -158,13 +163,8 @@ pub fn check_output_folder(dir: &Path, flag: &str) -> anyhow::Result<()> {
             existing.display()
         );
     }
-    match tempfile::Builder::new()
-        .prefix(TEMP_PREFIX)
-        .suffix(TEMP_SUFFIX)
-        .tempfile_in(existing)
-    {
-        // The probe file is removed when dropped.
-        Ok(_) => Ok(()),
+    match probe_write(existing) {
+        Ok(()) => Ok(()),
         Err(err) => bail!(
             "{flag} {}: cannot write in the folder {} ({}); choose another folder",
             dir.display(),
