@@ -8,7 +8,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use collide::run::backend_kind::BackendKind;
-use collide::run::limits::{MAX_WORKERS_PER_CORE, Machine};
+use collide::run::limits::{MAX_WORKERS_PER_CPU, Machine};
 use collide::study::records;
 use rustix::process::Signal;
 
@@ -335,7 +335,7 @@ fn worker_counts_above_the_ceiling_are_refused_unless_insisted_on() {
     let dir = tempfile::tempdir().unwrap();
     let scene = scene_file(dir.path(), "gas.toml", SCENE);
     let scene = scene.to_str().unwrap();
-    let ceiling = MAX_WORKERS_PER_CORE * collide::system::machine::machine_cores();
+    let ceiling = MAX_WORKERS_PER_CPU * collide::system::machine::usable_cpus();
     let over = (ceiling + 1).to_string();
     for count in [over.as_str(), "3000", "10000"] {
         let stderr = refused(&["simulate", scene, "--backend", "rayon", "--threads", count]);

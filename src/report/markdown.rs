@@ -373,11 +373,7 @@ fn speedup_table(out: &mut String, setup: &Setup) {
     );
     for backend in &setup.backends {
         for point in &backend.points {
-            let karp_flatt = if point.karp_flatt.is_finite() {
-                format!("{:.3}", point.karp_flatt)
-            } else {
-                "—".to_owned()
-            };
+            let karp_flatt = finite_or_dash(point.karp_flatt, format!("{:.3}", point.karp_flatt));
             let drawn = if setup.drawn {
                 format!(" {:.0} |", point.fps_with_drawing)
             } else {

@@ -4,10 +4,10 @@
 
 use crate::run::spec::Footprint;
 
-/// Above this many workers (threads or ranks) per CPU this process may use a run is refused unless
-/// the user insists (`--oversubscribe`, or `oversubscribe = true` in a manifest's
-/// `[backends]`): beyond it a run measures the scheduler, not the simulation.
-pub const MAX_WORKERS_PER_CORE: usize = 8;
+/// Above this many workers (threads or ranks) per CPU this process may use, a run is
+/// refused unless the user insists (`--oversubscribe`, or `oversubscribe = true` in a
+/// manifest's `[backends]`): beyond it a run measures the scheduler, not the simulation.
+pub const MAX_WORKERS_PER_CPU: usize = 8;
 
 /// Placement estimated to take longer than this many seconds is announced first.
 pub const LONG_PLACEMENT_S: f64 = 10.0;
@@ -37,7 +37,7 @@ impl Machine {
 
     /// The most workers a run may use without insisting.
     pub fn max_workers(&self) -> usize {
-        MAX_WORKERS_PER_CORE * self.usable_cpus.max(1)
+        MAX_WORKERS_PER_CPU * self.usable_cpus.max(1)
     }
 }
 
@@ -50,7 +50,7 @@ pub struct WorkerSource<'a> {
     pub insist: &'a str,
 }
 
-/// `Ok` when `workers` is within [`MAX_WORKERS_PER_CORE`] per usable CPU (or the user
+/// `Ok` when `workers` is within [`MAX_WORKERS_PER_CPU`] per usable CPU (or the user
 /// insists); otherwise what was wrong and the two ways out.
 pub fn check_workers(
     workers: usize,
@@ -63,9 +63,9 @@ pub fn check_workers(
         return Ok(());
     }
     Err(format!(
-        "{} asks for {workers} workers, more than {MAX_WORKERS_PER_CORE} per CPU \
-         this process may use ({} here: at most {ceiling}), where a run measures the scheduler rather than \
-         the simulation; lower the count, or {} to run it anyway",
+        "{} asks for {workers} workers, more than {MAX_WORKERS_PER_CPU} per CPU this \
+         process may use ({} here: at most {ceiling}), where a run measures the scheduler \
+         rather than the simulation; lower the count, or {} to run it anyway",
         source.field, machine.usable_cpus, source.insist
     ))
 }

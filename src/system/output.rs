@@ -110,28 +110,40 @@ pub fn check_output_file(path: &Path, flag: &str) -> anyhow::Result<()> {
         Some(parent) if !parent.as_os_str().is_empty() => parent,
         _ => Path::new("."),
     };
-    match std::fs::metadata(dir) {
-        Ok(meta) if meta.is_dir() => match probe_write(dir) {
-            Ok(()) => Ok(()),
-            Err(err) => bail!(
-                "{flag} {}: cannot write in the folder {} ({}); choose another path",
-                path.display(),
-                dir.display(),
-                io_reason(&err)
-            ),
-        },
-        Ok(_) => bail!(
-            "{flag} {}: {} is a file, not a folder; choose a path in an existing folder",
-            path.display(),
-            dir.display()
-        ),
-        Err(err) => bail!(
+    if let Err(err) = std::fs::metadata(dir) {
+        bail!(
             "{flag} {}: cannot use the folder {} ({}); create it first or choose another path",
             path.display(),
             dir.display(),
             io_reason(&err)
-        ),
+        );
     }
+    check_writable_folder(
+        dir,
+        path,
+        flag,
+        "choose a path in a folder you may write in",
+    )
+}
+
+/// Checks that `dir`, which exists, is a folder this process may write into; the error
+/// names `path` (what the user gave, in or below `dir`), `flag` and `fix`.
+fn check_writable_folder(dir: &Path, path: &Path, flag: &str, fix: &str) -> anyhow::Result<()> {
+    if !dir.is_dir() {
+        bail!(
+            "{flag} {}: {} is a file, not a folder; {fix}",
+            path.display(),
+            dir.display()
+        );
+    }
+    probe_write(dir).map_err(|err| {
+        anyhow::anyhow!(
+            "{flag} {}: cannot write in the folder {} ({}); {fix}",
+            path.display(),
+            dir.display(),
+            io_reason(&err)
+        )
+    })
 }
 
 /// Whether this process may create a file in the folder `dir`: a probe file, removed
@@ -156,22 +168,7 @@ pub fn check_output_folder(dir: &Path, flag: &str) -> anyhow::Result<()> {
         })
         .find(|part| part.exists())
         .unwrap_or(Path::new("."));
-    if !existing.is_dir() {
-        bail!(
-            "{flag} {}: {} is a file, not a folder; choose another folder",
-            dir.display(),
-            existing.display()
-        );
-    }
-    match probe_write(existing) {
-        Ok(()) => Ok(()),
-        Err(err) => bail!(
-            "{flag} {}: cannot write in the folder {} ({}); choose another folder",
-            dir.display(),
-            existing.display(),
-            io_reason(&err)
-        ),
-    }
+    check_writable_folder(existing, dir, flag, "choose another folder")
 }
 
 /// An I/O error's reason in words, without the OS error number.

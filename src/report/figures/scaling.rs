@@ -254,7 +254,7 @@ fn draw(figure: Figure, setup: &Setup, root: &Canvas<'_>) -> anyhow::Result<()> 
 /// The value axis of a figure over `backends`: every drawn value, with room above and
 /// below (the ideal speedup up to `max_workers`, and 100% efficiency, always show).
 fn y_range(figure: Figure, backends: &[&BackendScaling], max_workers: f64) -> (f64, f64) {
-    let values: Vec<f64> = backends
+    let (mut low, mut high) = backends
         .iter()
         .flat_map(|b| b.points.iter())
         .flat_map(|p| {
@@ -262,10 +262,7 @@ fn y_range(figure: Figure, backends: &[&BackendScaling], max_workers: f64) -> (f
             [low, mid, high, figure.beside(p).unwrap_or(f64::NAN)]
         })
         .filter(|v| v.is_finite() && *v > 0.0)
-        .collect();
-    let (mut low, mut high) = values
-        .iter()
-        .fold((f64::INFINITY, 0.0_f64), |(lo, hi), &v| {
+        .fold((f64::INFINITY, 0.0_f64), |(lo, hi), v| {
             (lo.min(v), hi.max(v))
         });
     if !low.is_finite() {
@@ -286,25 +283,16 @@ fn draw_reference(
     figure: Figure,
     max_workers: f64,
 ) -> anyhow::Result<()> {
-    match figure {
-        Figure::Speedup => {
-            let ideal = [(1.0, 1.0), (max_workers, max_workers)];
-            chart
-                .draw_series(LineSeries::new(ideal, BLACK.mix(0.4).stroke_width(1)))
-                .map_err(|e| anyhow!("{e}"))?
-                .label("ideal S = p")
-                .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.mix(0.4)));
-        }
-        Figure::Efficiency => {
-            let floor = [(0.8, 0.75), (max_workers * 1.25, 0.75)];
-            chart
-                .draw_series(LineSeries::new(floor, BLACK.mix(0.4).stroke_width(1)))
-                .map_err(|e| anyhow!("{e}"))?
-                .label("75%")
-                .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.mix(0.4)));
-        }
-        _ => {}
-    }
+    let (line, label) = match figure {
+        Figure::Speedup => ([(1.0, 1.0), (max_workers, max_workers)], "ideal S = p"),
+        Figure::Efficiency => ([(0.8, 0.75), (max_workers * 1.25, 0.75)], "75%"),
+        _ => return Ok(()),
+    };
+    chart
+        .draw_series(LineSeries::new(line, BLACK.mix(0.4).stroke_width(1)))
+        .map_err(|e| anyhow!("{e}"))?
+        .label(label)
+        .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.mix(0.4)));
     Ok(())
 }
 
