@@ -424,7 +424,9 @@ impl RankState {
             &mut self.shared,
             seen_elsewhere,
         );
-        self.contacts.sort_unstable_by_key(|contact| contact.key);
+        self.schedule
+            .order
+            .arrange(particles.len(), &mut self.contacts);
     }
 
     fn resolve_own_chains(&mut self, dt: f64) {

@@ -29,6 +29,7 @@ use crate::sim::grid::{
 };
 use crate::sim::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin};
 use crate::sim::observe::observe;
+use crate::sim::prefetch::prefetch;
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::ContactSchedule;
 use crate::sim::step::{FIRST_BUILDS_SINCE_REORDER, REORDER_INTERVAL, advance_disks};
@@ -264,7 +265,7 @@ impl ThreadedStepper {
                         list.find_contacts(particles, domain, &mut contacts);
                         // Split while the pairs are in list order, close in memory.
                         schedule.split(particles.len(), &mut contacts, &mut handed_over, pinned);
-                        contacts.sort_unstable_by_key(|contact| contact.key);
+                        schedule.order.arrange(particles.len(), &mut contacts);
                         *band_contacts = contacts;
                         *band_handed_over = handed_over;
                     });
@@ -580,5 +581,14 @@ impl DiskState for ChainDisks<'_> {
             *self.0.vx.add(idx) = vx;
             *self.0.vy.add(idx) = vy;
         }
+    }
+    #[inline(always)]
+    fn prefetch(&self, idx: usize) {
+        let disks = &self.0;
+        for values in [disks.x, disks.y, disks.vx, disks.vy] {
+            prefetch(values.wrapping_add(idx));
+        }
+        prefetch(disks.radius.as_ptr().wrapping_add(idx));
+        prefetch(disks.mass.as_ptr().wrapping_add(idx));
     }
 }

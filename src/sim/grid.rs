@@ -36,13 +36,15 @@ impl Contact {
     }
 }
 
-/// One disk in the sorted view: what the pair scan reads, 32 bytes, kept in x order
-/// inside its strip.
+/// One disk in the sorted view: what the pair scan reads, 16 bytes, kept in x order
+/// inside its strip. The position is rounded to f32, which halves the memory of the
+/// grid and of its scans; every test on it is widened by the rounding
+/// ([`rounding_slack`]), so it finds a superset of the pairs, and the pairs that count
+/// are decided by the disks' own f64 positions.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Entry {
-    x: f64,
-    y: f64,
-    radius: f64,
+    x: f32,
+    y: f32,
     /// Storage index of the disk.
     idx: u32,
     /// Global index of the strip the disk is in.
@@ -55,7 +57,8 @@ impl Entry {
         self.idx
     }
 
-    pub fn x(&self) -> f64 {
+    /// The disk's x (rounded to f32) at the last refresh.
+    pub fn x(&self) -> f32 {
         self.x
     }
 
@@ -255,9 +258,8 @@ impl StripGrid {
     pub fn entry(&self, particles: &Particles, idx: usize) -> Entry {
         let y = particles.y[idx];
         Entry {
-            x: particles.x[idx],
-            y,
-            radius: particles.radius[idx],
+            x: particles.x[idx] as f32,
+            y: y as f32,
             idx: idx as u32,
             strip: self.layout.strip_of(y) as u32,
         }
@@ -270,9 +272,8 @@ impl StripGrid {
         let ghosts = self.strips.last_mut().expect("a ghost strip");
         ghosts.clear();
         ghosts.extend(indices.map(|idx| Entry {
-            x: particles.x[idx],
-            y: particles.y[idx],
-            radius: particles.radius[idx],
+            x: particles.x[idx] as f32,
+            y: particles.y[idx] as f32,
             idx: idx as u32,
             strip,
         }));
@@ -355,22 +356,25 @@ impl StripGrid {
             particles,
             contacts,
         };
-        self.scan_in(strips, domain, 0.0, &mut sink);
+        self.scan_in(strips, particles, domain, 0.0, &mut sink);
     }
 
     /// Appends, as `[storage index, storage index]`, the pairs whose scanning disk lies
     /// in `strips` (owned, global indices) and whose centres are closer than their radii
     /// plus `skin`: the candidates of a neighbour list. The layout's strips must be at
-    /// least `2 · max_radius + skin` tall ([`StripLayout::with_skin`]).
+    /// least `2 · max_radius + skin` tall ([`StripLayout::with_skin`]). With equal radii
+    /// the list may hold a few pairs up to the rounding of the f32 entries further apart
+    /// ([`rounding_slack`]): a superset, which the list's exact test filters.
     pub fn find_pairs_in(
         &self,
         strips: Range<usize>,
+        particles: &Particles,
         domain: &Domain,
         skin: f64,
         pairs: &mut Vec<[u32; 2]>,
     ) {
         debug_assert!(self.layout.reach >= skin);
-        self.scan_in(strips, domain, skin, &mut PairSink { pairs });
+        self.scan_in(strips, particles, domain, skin, &mut PairSink { pairs });
     }
 
     /// Appends every pair of a disk stored at one of `movers` and another disk that
@@ -438,12 +442,16 @@ impl StripGrid {
                 }
                 (true, true) => [(xa - reach, xa + reach), (0.0, 0.0)],
             };
+            // The entries' x is rounded to f32: widen the windows by the rounding of any x
+            // inside them (at most |xa| + reach, or the box's width when periodic).
+            let slack = rounding_slack(xa.abs().max(width) + reach);
             for strip in first_strip..=last_strip {
                 let entries = &self.strips[strip.rem_euclid(n_strips) as usize][..];
                 // A window with `from == to` holds nothing.
-                for &(from, to) in &windows {
-                    let first = entries.partition_point(|b| b.x < from);
-                    for b in entries[first..].iter().take_while(|b| b.x < to) {
+                for &(from, to) in windows.iter().filter(|(from, to)| from < to) {
+                    let (from, to) = (from - slack, to + slack);
+                    let first = entries.partition_point(|b| f64::from(b.x) < from);
+                    for b in entries[first..].iter().take_while(|b| f64::from(b.x) < to) {
                         let j = b.idx as usize;
                         if j == a {
                             continue;
@@ -459,14 +467,45 @@ impl StripGrid {
         }
     }
 
-    fn scan_in(&self, strips: Range<usize>, domain: &Domain, skin: f64, sink: &mut impl Sink) {
+    fn scan_in(
+        &self,
+        strips: Range<usize>,
+        particles: &Particles,
+        domain: &Domain,
+        skin: f64,
+        sink: &mut impl Sink,
+    ) {
         let local = strips.start - self.first..strips.end - self.first;
         match (domain.boundary, self.layout.equal_radius.is_some()) {
-            (Boundary::Walls, true) => self.scan::<false, true>(local, domain, skin, sink),
-            (Boundary::Walls, false) => self.scan::<false, false>(local, domain, skin, sink),
-            (Boundary::Periodic, true) => self.scan::<true, true>(local, domain, skin, sink),
-            (Boundary::Periodic, false) => self.scan::<true, false>(local, domain, skin, sink),
+            (Boundary::Walls, true) => {
+                self.scan::<false, true, _>(local, particles, domain, skin, sink)
+            }
+            (Boundary::Walls, false) => {
+                self.scan::<false, false, _>(local, particles, domain, skin, sink)
+            }
+            (Boundary::Periodic, true) => {
+                self.scan::<true, true, _>(local, particles, domain, skin, sink)
+            }
+            (Boundary::Periodic, false) => {
+                self.scan::<true, false, _>(local, particles, domain, skin, sink)
+            }
         }
+    }
+
+    /// The largest |x| or |y| of the f32 entries of the local strips `local` and of the
+    /// strip each scans above it: what bounds the rounding of their positions.
+    fn largest_coordinate(&self, local: &Range<usize>) -> f64 {
+        let above = (local.end < self.strips.len()).then_some(local.end);
+        let wrapped = (self.north_wraps && local.end == self.strips.len()).then_some(0);
+        local
+            .clone()
+            .chain(above)
+            .chain(wrapped)
+            .flat_map(|strip| &self.strips[strip])
+            .fold(0.0_f32, |largest, entry| {
+                largest.max(entry.x.abs()).max(entry.y.abs())
+            })
+            .into()
     }
 
     /// Offers `sink` every pair whose scanning disk lies in the local strips `local`
@@ -474,30 +513,56 @@ impl StripGrid {
     /// `skin`. Windows in x: a disk's own strip from the next disk on, and the strip
     /// above, both within `reach` of it.
     ///
+    /// The windows and a first test read the f32 entries, widened by their rounding
+    /// ([`rounding_slack`]) to the largest contact distance plus `skin`; a pair that
+    /// passes is then decided by the disks' f64 positions and radii with the shared
+    /// arithmetic, unless the sink takes a superset (a neighbour list of equal disks).
+    ///
     /// Most windows hold a few disks: the first [`OWN_WINDOW`] and [`NORTH_WINDOW`]
     /// candidates are tested whatever their count (a candidate outside the window
     /// fails the window test, not a loop exit: no mispredicted branch per disk), and a
     /// loop continues only the rare window that reaches further.
-    fn scan<const PERIODIC: bool, const EQUAL_RADII: bool>(
+    fn scan<const PERIODIC: bool, const EQUAL_RADII: bool, S: Sink>(
         &self,
         local: Range<usize>,
+        particles: &Particles,
         domain: &Domain,
         skin: f64,
-        sink: &mut impl Sink,
+        sink: &mut S,
     ) {
-        let (reach, width) = (self.layout.reach, self.layout.width);
-        // With a skin of 0, `a.radius + b.radius + skin` is the contact distance itself:
-        // adding 0.0 to a positive number is exact. With equal radii it is one number.
+        let largest = self.largest_coordinate(&local).max(self.layout.width);
+        let slack = rounding_slack(largest + self.layout.reach);
+        let reach = rounded_up(self.layout.reach + slack);
+        let width = self.layout.width as f32;
+        let near_limit = 2.0 * self.layout.max_radius + skin + slack;
+        let near_sq = near_limit * near_limit;
+        let near = |a: &Entry, b: &Entry| {
+            let (ax, ay, bx, by) = (a.x.into(), a.y.into(), b.x.into(), b.y.into());
+            let (dx, dy) = domain.separation_in::<PERIODIC>(ax, ay, bx, by);
+            dx * dx + dy * dy < near_sq
+        };
+        // With a skin of 0, `r_a + r_b + skin` is the contact distance itself: adding 0.0
+        // to a positive number is exact. With equal radii it is one number.
+        let (x, y, radius) = (&particles.x[..], &particles.y[..], &particles.radius[..]);
         let equal_radius = self.layout.equal_radius.unwrap_or(0.0);
         let equal_limit = equal_radius + equal_radius + skin;
-        let within = |a: &Entry, b: &Entry| {
-            let (dx, dy) = domain.separation_in::<PERIODIC>(a.x, a.y, b.x, b.y);
+        let exact = |a: &Entry, b: &Entry| {
+            let (i, j) = (a.idx as usize, b.idx as usize);
+            let (dx, dy) = domain.separation_in::<PERIODIC>(x[i], y[i], x[j], y[j]);
             let limit = if EQUAL_RADII {
                 equal_limit
             } else {
-                a.radius + b.radius + skin
+                radius[i] + radius[j] + skin
             };
             dx * dx + dy * dy < limit * limit
+        };
+        let superset = !S::EXACT && EQUAL_RADII;
+        let within = |a: &Entry, b: &Entry| {
+            if superset {
+                near(a, b)
+            } else {
+                near(a, b) && exact(a, b)
+            }
         };
         let no_entries: &[Entry] = &[];
         for strip in local {
@@ -591,7 +656,29 @@ fn offer_window<const K: usize>(
 /// Where the scan's candidate pairs go: `offer` is called for every candidate, with
 /// whether it passed the test.
 trait Sink {
+    /// Whether the pairs must be decided exactly (by the disks' f64 positions), or a
+    /// superset will do (the f32 entries' widened test alone).
+    const EXACT: bool;
     fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry);
+}
+
+/// How far a test on f32 entries must be widened to never reject a pair the f64
+/// positions would accept, when every coordinate involved, and every sum of them, is
+/// at most `largest` in magnitude: rounding to f32 moves a coordinate by at most
+/// `largest · 2⁻²⁴`, and the few f32 operations of a test add as much again a few
+/// times; `2⁻²⁰` (16 units) covers them with room to spare.
+fn rounding_slack(largest: f64) -> f64 {
+    largest * f64::from(f32::EPSILON) * 8.0
+}
+
+/// `value` as an f32 no smaller than it.
+fn rounded_up(value: f64) -> f32 {
+    let rounded = value as f32;
+    if f64::from(rounded) < value {
+        rounded.next_up()
+    } else {
+        rounded
+    }
 }
 
 /// Overlapping pairs as [`Contact`]s. Few candidates overlap: the branch is predictable.
@@ -601,6 +688,7 @@ struct ContactSink<'a> {
 }
 
 impl Sink for ContactSink<'_> {
+    const EXACT: bool = true;
     #[inline(always)]
     fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry) {
         if accepted {
@@ -618,6 +706,7 @@ struct PairSink<'a> {
 }
 
 impl Sink for PairSink<'_> {
+    const EXACT: bool = false;
     #[inline(always)]
     fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry) {
         if self.pairs.len() == self.pairs.capacity() {
@@ -644,22 +733,16 @@ pub fn refresh_band(
     movers: &mut Vec<Entry>,
 ) {
     let (x, y) = (&particles.x[..], &particles.y[..]);
-    // Radii never change, but the disks may have been re-stored since the grid was
-    // built (a stepper may step disks stored in another order than those it was made
-    // for): with unequal radii, read them again too.
-    let radius = (!layout.has_equal_radii()).then_some(&particles.radius[..]);
     for (offset, strip) in band.iter_mut().enumerate() {
         let here = (first + offset) as u32;
         let mut kept = 0;
         for read in 0..strip.len() {
             let mut entry = strip[read];
             let idx = entry.idx as usize;
-            entry.x = x[idx];
-            entry.y = y[idx];
-            if let Some(radius) = radius {
-                entry.radius = radius[idx];
-            }
-            entry.strip = layout.strip_of(entry.y) as u32;
+            entry.x = x[idx] as f32;
+            entry.y = y[idx] as f32;
+            // The strip goes by the f64 height, as everywhere.
+            entry.strip = layout.strip_of(y[idx]) as u32;
             if entry.strip == here {
                 strip[kept] = entry;
                 kept += 1;
@@ -763,6 +846,94 @@ fn all_pairs<const PERIODIC: bool>(
             let contact = radius[i] + radius[j];
             if dx * dx + dy * dy < contact * contact {
                 contacts.push(Contact::new(particles, i, j));
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::particles::Disk;
+
+    /// 300 disks in a corner far from the origin of a box 2²⁵ wide, where f32 positions
+    /// are 4 apart: centres 0.001–3 apart, radii equal or not. The f32 entries alone
+    /// would misjudge most of these pairs.
+    fn far_cluster(equal_radii: bool) -> Particles {
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut uniform = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1_u64 << 53) as f64
+        };
+        let disks: Vec<Disk> = (0..300)
+            .map(|_| Disk {
+                x: 33_554_000.0 + 30.0 * uniform(),
+                y: 1.0 + 30.0 * uniform(),
+                vx: 0.0,
+                vy: 0.0,
+                radius: if equal_radii { 1.0 } else { 0.5 + uniform() },
+                mass: 1.0,
+            })
+            .collect();
+        Particles::from_disks(&disks)
+    }
+
+    fn sorted(mut pairs: Vec<[u32; 2]>) -> Vec<[u32; 2]> {
+        for pair in &mut pairs {
+            pair.sort_unstable();
+        }
+        pairs.sort_unstable();
+        pairs
+    }
+
+    /// The exact search finds exactly the pairs of the all-pairs test, and a neighbour
+    /// list holds at least every pair within its skin, however coarse f32 is where the
+    /// disks are: the f32 entries only narrow the search.
+    #[test]
+    fn searches_on_f32_entries_miss_no_pair_far_from_the_origin() {
+        for boundary in [Boundary::Walls, Boundary::Periodic] {
+            let domain = Domain {
+                width: 33_554_432.0,
+                height: 32.0,
+                boundary,
+            };
+            for equal_radii in [true, false] {
+                let particles = far_cluster(equal_radii);
+                let grid = StripGrid::new(&domain, &particles);
+                let mut found = Vec::new();
+                grid.find_contacts(&particles, &domain, &mut found);
+                let mut all = Vec::new();
+                find_contacts_all_pairs(&particles, &domain, &mut all);
+                let keys = |contacts: &[Contact]| {
+                    let mut keys: Vec<u64> = contacts.iter().map(|c| c.key).collect();
+                    keys.sort_unstable();
+                    keys
+                };
+                assert_eq!(
+                    keys(&found),
+                    keys(&all),
+                    "{boundary:?}, equal radii {equal_radii}"
+                );
+                assert!(all.len() > 100, "the cluster is dense: {} pairs", all.len());
+
+                let skin = 0.5;
+                let listing = StripGrid::with_skin(&domain, &particles, skin);
+                let mut listed = Vec::new();
+                listing.find_pairs_in(listing.owned(), &particles, &domain, skin, &mut listed);
+                let listed = sorted(listed);
+                let (x, y, r) = (&particles.x, &particles.y, &particles.radius);
+                for i in 0..particles.len() {
+                    for j in i + 1..particles.len() {
+                        let (dx, dy) = domain.separation(x[i], y[i], x[j], y[j]);
+                        let limit = r[i] + r[j] + skin;
+                        if dx * dx + dy * dy < limit * limit {
+                            let pair = [i as u32, j as u32];
+                            assert!(listed.binary_search(&pair).is_ok(), "{pair:?} listed");
+                        }
+                    }
+                }
             }
         }
     }

@@ -14,6 +14,7 @@ pub mod neighbours;
 pub mod observe;
 pub mod particles;
 pub mod pilot;
+pub mod prefetch;
 pub mod resolve;
 pub mod scene;
 pub mod schedule;

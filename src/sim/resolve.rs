@@ -48,6 +48,9 @@ pub const SLOP: f64 = 0.005;
 /// every sweep busy until the cap.
 const SWEEP_TOLERANCE: f64 = 1e-3;
 
+/// Contacts ahead of the one being resolved whose disks are fetched into the caches.
+const PREFETCH_AHEAD: usize = 8;
+
 /// Resolves `contacts` (in canonical order, [`Contact::key`]) for one step of `dt`:
 /// one pass of pair impulses with the scene's restitution, calling `collided` with the
 /// key of each pair that received one; then, with gravity, resting contact (module
@@ -61,7 +64,11 @@ pub fn resolve_contacts<S: DiskState>(
     counters: &mut StepCounters,
     mut collided: impl FnMut(u64),
 ) {
-    for contact in contacts {
+    for (pos, contact) in contacts.iter().enumerate() {
+        if let Some(ahead) = contacts.get(pos + PREFETCH_AHEAD) {
+            disks.prefetch(ahead.a as usize);
+            disks.prefetch(ahead.b as usize);
+        }
         let outcome = resolve_contact(
             disks,
             domain,

@@ -11,6 +11,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::{Deserialize, Serialize};
 
 use super::particles::Particles;
+use super::prefetch::prefetch;
 
 /// Random sequential addition of equal disks jams near this area fraction in 2D.
 pub const RSA_JAMMING_PACKING: f64 = 0.547;
@@ -713,20 +714,6 @@ fn with_huge_pages<T>(capacity: usize) -> Vec<T> {
         }
     }
     values
-}
-
-/// A hint to the memory system that `item` will be read soon.
-#[inline(always)]
-fn prefetch<T>(item: &T) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        // SAFETY: a prefetch never faults and has no architectural effect; `item` is a
-        // valid reference anyway.
-        unsafe { _mm_prefetch::<_MM_HINT_T0>((item as *const T).cast::<i8>()) };
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = item;
 }
 
 /// Where random tries for a disk of radius `r` may land: the whole box when periodic,

@@ -14,6 +14,7 @@ use super::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin, mark_
 use super::particles::{DiskSlices, Particles};
 use super::resolve::resolve_contacts;
 use super::scene::{Boundary, Domain, Physics, Scene, wrap_periodic};
+use super::schedule::ResolutionOrder;
 
 /// Grid builds between re-storings of the disks in grid order.
 pub const REORDER_INTERVAL: u32 = 16;
@@ -64,6 +65,7 @@ pub struct Stepper {
     /// Grid builds since the disks were last stored in sorted order.
     builds_since_reorder: u32,
     contacts: Vec<Contact>,
+    order: ResolutionOrder,
     counters: StepCounters,
 }
 
@@ -85,6 +87,7 @@ impl Stepper {
             escapees: Vec::new(),
             builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
             contacts: Vec::new(),
+            order: ResolutionOrder::default(),
             counters: StepCounters::default(),
         }
     }
@@ -98,7 +101,7 @@ impl Stepper {
         self.counters
     }
 
-    /// The pairs the last [`Stepper::find_contacts`] found, in canonical order.
+    /// The pairs the last [`Stepper::find_contacts`] found, in resolution order.
     pub fn contacts(&self) -> &[Contact] {
         &self.contacts
     }
@@ -123,8 +126,9 @@ impl Stepper {
         self.counters.merge(&walls);
     }
 
-    /// Finds every overlapping pair and puts them in canonical order. May change the
-    /// storage order of the disks (never their ids or values).
+    /// Finds every overlapping pair, in an order that resolves with the canonical bits
+    /// ([`ResolutionOrder::arrange`]). May change the storage order of the disks (never
+    /// their ids or values).
     pub fn find_contacts(&mut self, particles: &mut Particles) {
         self.contacts.clear();
         match self.params.broadphase {
@@ -133,10 +137,10 @@ impl Stepper {
                 find_contacts_all_pairs(particles, &self.domain, &mut self.contacts);
             }
         }
-        // Canonical order: the result of resolution must not depend on how pairs were found.
-        self.contacts.sort_unstable_by_key(|contact| contact.key);
-        // A pair of an escapee may have been found twice (see `find_contacts_listed`).
-        self.contacts.dedup_by_key(|contact| contact.key);
+        // The result of resolution must not depend on how pairs were found: lone pairs
+        // commute with every other, the rest go in canonical order. A pair of an escapee
+        // may have been found twice (see `find_contacts_listed`): kept once.
+        self.order.arrange(particles.len(), &mut self.contacts);
     }
 
     /// The overlapping pairs from the neighbour list, rebuilt when it is stale. Disks
