@@ -116,6 +116,11 @@ impl StripLayout {
         self.equal_radius.is_some()
     }
 
+    /// The height of the box.
+    pub fn height(&self) -> f64 {
+        self.n_strips as f64 / self.inv_strip_height
+    }
+
     /// The strip a disk at height `y` belongs to. Disks outside a walled box go to the
     /// nearest edge strip, which still holds every disk they can touch; `as usize`
     /// saturates, so negative heights (and NaN) land in strip 0.
@@ -492,20 +497,34 @@ impl StripGrid {
         }
     }
 
-    /// The largest |x| or |y| of the f32 entries of the local strips `local` and of the
-    /// strip each scans above it: what bounds the rounding of their positions.
+    /// A bound on |x| and |y| of the f32 entries of the local strips `local` and of the
+    /// strip each scans above it, and on the box's sides: what bounds the rounding of
+    /// their positions and of the periodic images. A strip is sorted by x, so its ends
+    /// bound its |x|; a strip's disks are within the box's height, except in the edge
+    /// strips, which hold the disks outside a walled box and are read whole.
     fn largest_coordinate(&self, local: &Range<usize>) -> f64 {
         let above = (local.end < self.strips.len()).then_some(local.end);
         let wrapped = (self.north_wraps && local.end == self.strips.len()).then_some(0);
-        local
-            .clone()
-            .chain(above)
-            .chain(wrapped)
-            .flat_map(|strip| &self.strips[strip])
-            .fold(0.0_f32, |largest, entry| {
-                largest.max(entry.x.abs()).max(entry.y.abs())
-            })
-            .into()
+        let last_strip = self.layout.n_strips - 1;
+        let mut largest = self.layout.width.max(self.layout.height());
+        for strip in local.clone().chain(above).chain(wrapped) {
+            let entries = &self.strips[strip];
+            let ends = entries.first().into_iter().chain(entries.last());
+            for entry in ends {
+                largest = largest.max(f64::from(entry.x.abs()));
+            }
+            let global = if strip < self.n_owned {
+                self.first + strip
+            } else {
+                self.ghost_strip().unwrap_or(0)
+            };
+            if global == 0 || global == last_strip {
+                for entry in entries {
+                    largest = largest.max(f64::from(entry.y.abs()));
+                }
+            }
+        }
+        largest
     }
 
     /// Offers `sink` every pair whose scanning disk lies in the local strips `local`
@@ -530,8 +549,7 @@ impl StripGrid {
         skin: f64,
         sink: &mut S,
     ) {
-        let largest = self.largest_coordinate(&local).max(self.layout.width);
-        let slack = rounding_slack(largest + self.layout.reach);
+        let slack = rounding_slack(self.largest_coordinate(&local) + self.layout.reach);
         let reach = rounded_up(self.layout.reach + slack);
         let width = self.layout.width as f32;
         let near_limit = 2.0 * self.layout.max_radius + skin + slack;
