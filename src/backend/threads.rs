@@ -22,7 +22,7 @@ use crate::backend::{
 use crate::draw::offscreen::{Offscreen, draw_step};
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
-use crate::sim::collision::DiskState;
+use crate::sim::collision::{CommonProperties, DiskState, Properties};
 use crate::sim::grid::{
     Contact, Entry, StripGrid, find_contacts_all_pairs_from, number_slots, receive_band,
     refresh_band,
@@ -107,6 +107,8 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
 /// pool that should execute it (`ThreadPool::install`).
 #[derive(Debug)]
 pub struct ThreadedStepper {
+    /// The radius and mass of every disk, when all have the same.
+    common: Option<Properties>,
     domain: Domain,
     physics: Physics,
     params: StepParams,
@@ -146,6 +148,7 @@ impl ThreadedStepper {
     ) -> Self {
         let skin = Skin::for_scene(&domain, particles, params.dt);
         ThreadedStepper {
+            common: particles.common_properties(),
             domain,
             physics,
             params,
@@ -424,11 +427,12 @@ impl ThreadedStepper {
 
     fn resolve_contacts(&mut self, particles: &mut Particles) {
         let (domain, physics, dt) = (&self.domain, &self.physics, self.params.dt);
+        let common = self.common;
         let n_lists = self.contacts.len();
         if n_lists == 1 {
             // One list and the crossing chains (of escapees) share no disk: either order.
             resolve_contacts(
-                particles,
+                &mut CommonProperties::over(particles, common),
                 domain,
                 physics,
                 dt,
@@ -450,7 +454,7 @@ impl ThreadedStepper {
                     let mut disks = unsafe { shared.claim() };
                     let mut counters = StepCounters::default();
                     resolve_contacts(
-                        &mut disks,
+                        &mut CommonProperties::over(&mut disks, common),
                         domain,
                         physics,
                         dt,
@@ -467,7 +471,7 @@ impl ThreadedStepper {
             self.counters.merge(&band_counters);
         }
         resolve_contacts(
-            particles,
+            &mut CommonProperties::over(particles, common),
             domain,
             physics,
             dt,
@@ -583,12 +587,15 @@ impl DiskState for ChainDisks<'_> {
         }
     }
     #[inline(always)]
-    fn prefetch(&self, idx: usize) {
+    fn prefetch_motion(&self, idx: usize) {
         let disks = &self.0;
         for values in [disks.x, disks.y, disks.vx, disks.vy] {
             prefetch(values.wrapping_add(idx));
         }
-        prefetch(disks.radius.as_ptr().wrapping_add(idx));
-        prefetch(disks.mass.as_ptr().wrapping_add(idx));
+    }
+    #[inline(always)]
+    fn prefetch_properties(&self, idx: usize) {
+        prefetch(self.0.radius.as_ptr().wrapping_add(idx));
+        prefetch(self.0.mass.as_ptr().wrapping_add(idx));
     }
 }

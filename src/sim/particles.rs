@@ -6,6 +6,8 @@
 //! stages may reorder the arrays together, and anything that must not
 //! depend on storage order (pair order, hashes, sums) goes by `id`.
 
+use super::collision::Properties;
+
 /// Positions, velocities and properties of every disk, one `f64` array per quantity.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Particles {
@@ -214,6 +216,17 @@ impl Particles {
     /// Largest radius, 0 for an empty set.
     pub fn max_radius(&self) -> f64 {
         self.radius.iter().copied().fold(0.0, f64::max)
+    }
+
+    /// The radius and mass of every disk, when all have the same (and there are some).
+    pub fn common_properties(&self) -> Option<Properties> {
+        let first = Properties {
+            radius: *self.radius.first()?,
+            mass: *self.mass.first()?,
+        };
+        let common = self.radius.iter().all(|&radius| radius == first.radius)
+            && self.mass.iter().all(|&mass| mass == first.mass);
+        common.then_some(first)
     }
 
     /// Smallest radius, infinite for an empty set.

@@ -66,8 +66,10 @@ pub fn resolve_contacts<S: DiskState>(
 ) {
     for (pos, contact) in contacts.iter().enumerate() {
         if let Some(ahead) = contacts.get(pos + PREFETCH_AHEAD) {
-            disks.prefetch(ahead.a as usize);
-            disks.prefetch(ahead.b as usize);
+            for disk in [ahead.a as usize, ahead.b as usize] {
+                disks.prefetch_motion(disk);
+                disks.prefetch_properties(disk);
+            }
         }
         let outcome = resolve_contact(
             disks,

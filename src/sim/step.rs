@@ -8,6 +8,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::collision::{CommonProperties, Properties};
 use super::counters::StepCounters;
 use super::grid::{Contact, StripGrid, find_contacts_all_pairs};
 use super::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin, mark_escapees};
@@ -66,6 +67,8 @@ pub struct Stepper {
     builds_since_reorder: u32,
     contacts: Vec<Contact>,
     order: ResolutionOrder,
+    /// The radius and mass of every disk, when all have the same.
+    common: Option<Properties>,
     counters: StepCounters,
 }
 
@@ -88,6 +91,7 @@ impl Stepper {
             builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
             contacts: Vec::new(),
             order: ResolutionOrder::default(),
+            common: particles.common_properties(),
             counters: StepCounters::default(),
         }
     }
@@ -209,7 +213,7 @@ impl Stepper {
         collided: impl FnMut(u64),
     ) {
         resolve_contacts(
-            particles,
+            &mut CommonProperties::over(particles, self.common),
             &self.domain,
             &self.physics,
             self.params.dt,
