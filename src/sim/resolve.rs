@@ -51,7 +51,8 @@ const SWEEP_TOLERANCE: f64 = 1e-3;
 /// Contacts ahead of the one being resolved whose disks are fetched into the caches.
 const PREFETCH_AHEAD: usize = 8;
 
-/// Resolves `contacts` (in canonical order, [`Contact::key`]) for one step of `dt`:
+/// Resolves `contacts` (whole chains, each in canonical order, [`Contact::key`]: see
+/// `sim::schedule::ResolutionOrder`) for one step of `dt`:
 /// one pass of pair impulses with the scene's restitution, calling `collided` with the
 /// key of each pair that received one; then, with gravity, resting contact (module
 /// docs). Counts into `counters`.
