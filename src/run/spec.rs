@@ -227,9 +227,11 @@ impl PreparedRun {
 // Memory and time a run needs, known before anything is allocated. The step method's
 // figure is peak resident memory over N at N = 10⁷ (`/usr/bin/time -v collide simulate
 // experiments/scenes/seed-1000.toml --n 10000000 --packing 0.3 --steps 10 --seed 42`) on
-// a 2-core x86-64 Linux machine, release build, with the neighbour-list broad phase
-// (2026-11-23): 126 B per disk serial, 140 B with rayon on 2 threads; each further
-// thread adds about 5 B (its band's union-find scratch). The event method's, from the
+// a 2-core x86-64 Linux machine, release build, with the neighbour-list broad phase:
+// 126 B per disk serial and 140 B with rayon on 2 threads (2026-11-23); 114 B and 126 B
+// since the strip grid's entries shrank to 16 bytes (2026-11-24). By its arrays' sizes,
+// each further thread adds about 6 B (its band's union-find and resolution-order
+// scratch), so 8 threads stay below the 176 kept here. The event method's, from the
 // slope between N = 250 000 and 10⁶ (before the neighbour lists; its state did not
 // change): 352 B (serial). The intercept is about 21 MB. Re-measure when the state or
 // its scratch memory changes size.
