@@ -289,6 +289,7 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
         quiet: args.quiet,
         programs: vec![runner::Program::this()?],
         calibrate: false,
+        mpi_yields_when_idle: false,
     };
     let outcome = runner::run_study(&study, &text, &options)?;
     println!(

@@ -138,6 +138,33 @@ fn a_study_records_every_repetition_and_resume_runs_only_what_is_missing() {
 }
 
 #[test]
+fn repetitions_by_backend_measure_each_backend_as_often_as_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    let path = manifest(
+        dir.path(),
+        &format!("warmups = 0\nrepetitions = {{ serial = 3, rayon = 1 }}\n{BACKENDS}"),
+    );
+    let ran = run_study(&path, &out, &[]);
+    assert!(
+        ran.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ran.stderr)
+    );
+    let parquet = records::files_in(&out.join("tiny")).unwrap();
+    let mut reps: Vec<(String, u32)> = records::read(&parquet[0])
+        .unwrap()
+        .iter()
+        .map(|r| (r.backend.clone(), r.repetition))
+        .collect();
+    reps.sort();
+    let expected: Vec<(String, u32)> = [("rayon", 0), ("serial", 0), ("serial", 1), ("serial", 2)]
+        .map(|(backend, rep)| (backend.to_owned(), rep))
+        .to_vec();
+    assert_eq!(reps, expected);
+}
+
+#[test]
 fn an_accuracy_study_runs_both_methods_and_reports_pareto_and_stability_figures() {
     let (dir, results, rows) = tiny_study(
         "repetitions = 1\nwarmups = 0\n[sweep]\ndt = [0.5, 0.1, 0.1]\nsteps = [4, 20, 20]\n\

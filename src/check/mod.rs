@@ -305,6 +305,7 @@ fn measure(
         quiet: options.quiet,
         programs,
         calibrate: true,
+        mpi_yields_when_idle: true,
     };
     let outcome = runner::run_study(study, manifest_text, &run_options)?;
     if outcome.failed > 0 {

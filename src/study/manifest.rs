@@ -27,12 +27,22 @@ pub struct Study {
     pub description: String,
     /// The manifest it came from.
     pub manifest: PathBuf,
-    pub repetitions: u32,
     pub warmups: u32,
     /// Per run; a run that takes longer is killed and recorded as failed.
     pub timeout: Duration,
     pub scaling: Scaling,
     pub configurations: Vec<Configuration>,
+}
+
+impl Study {
+    /// The rounds of repetitions: as many as the configuration measured most often has.
+    pub fn rounds(&self) -> u32 {
+        self.configurations
+            .iter()
+            .map(|configuration| configuration.repetitions)
+            .max()
+            .unwrap_or(0)
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
@@ -75,6 +85,9 @@ pub struct Configuration {
     /// Run worker counts above the ceiling of [`crate::run::limits`] (`[backends]
     /// oversubscribe = true`); not part of the key.
     pub oversubscribe: bool,
+    /// Measured runs (`repetitions`, by backend when a table); not part of the key, so
+    /// raising it and resuming runs only the new ones.
+    pub repetitions: u32,
     /// Memory and placement time of each of its runs, as checked against the machine.
     pub footprint: Footprint,
 }
@@ -136,7 +149,8 @@ struct RawManifest {
     name: Spanned<String>,
     #[serde(default)]
     description: String,
-    repetitions: Option<Spanned<i64>>,
+    /// A count for every backend, or a table of counts by backend name.
+    repetitions: Option<Spanned<toml::Value>>,
     warmups: Option<Spanned<i64>>,
     timeout_s: Option<Spanned<f64>>,
     scaling: Option<Spanned<Scaling>>,
@@ -209,7 +223,7 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
         }
         Ok(v as u32)
     };
-    let repetitions = count(&raw.repetitions, "repetitions", 3, 1)?;
+    let repetitions = repetitions_by_backend(&at, raw.repetitions.as_ref())?;
     let warmups = count(&raw.warmups, "warmups", 1, 0)?;
     let timeout_s = raw.timeout_s.as_ref().map_or(600.0, |t| *t.get_ref());
     if !(timeout_s > 0.0 && timeout_s.is_finite()) {
@@ -223,17 +237,54 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
         .scaling
         .as_ref()
         .map_or(Scaling::Strong, |s| *s.get_ref());
-    let configurations = configurations(&at, &raw, scaling, machine)?;
+    let configurations = configurations(&at, &raw, scaling, repetitions, machine)?;
     Ok(Study {
         name,
         description: raw.description,
         manifest: path.to_owned(),
-        repetitions,
         warmups,
         timeout: Duration::from_secs_f64(timeout_s),
         scaling,
         configurations,
     })
+}
+
+/// Measured runs per configuration, indexed by [`BackendKind`]: `repetitions = 30` for
+/// every backend, or a table by backend name (`[repetitions]` with `mpi = 90`), where a
+/// backend left out gets the default, 3.
+fn repetitions_by_backend(
+    at: &Locator,
+    value: Option<&Spanned<toml::Value>>,
+) -> Result<[u32; BackendKind::ALL.len()], ManifestError> {
+    const DEFAULT: u32 = 3;
+    let Some(value) = value else {
+        return Ok([DEFAULT; BackendKind::ALL.len()]);
+    };
+    let invalid = |message: String| at.invalid(value.span().start, message);
+    let count = |field: String, count: &toml::Value| match count.as_integer() {
+        Some(count) if count >= 1 => u32::try_from(count)
+            .map_err(|_| invalid(format!("`{field}` is {count}; give at most {}", u32::MAX))),
+        _ => Err(invalid(format!(
+            "`{field}` is {count}; give a whole number of at least 1"
+        ))),
+    };
+    match value.get_ref() {
+        toml::Value::Table(table) => {
+            let mut counts = [DEFAULT; BackendKind::ALL.len()];
+            for (name, value) in table {
+                let Some(kind) = BackendKind::from_name(name) else {
+                    let names: Vec<&str> = BackendKind::ALL.map(BackendKind::name).to_vec();
+                    return Err(invalid(format!(
+                        "`repetitions.{name}` names no backend; the table takes {}",
+                        names.join(", ")
+                    )));
+                };
+                counts[kind as usize] = count(format!("repetitions.{name}"), value)?;
+            }
+            Ok(counts)
+        }
+        other => Ok([count("repetitions".to_owned(), other)?; BackendKind::ALL.len()]),
+    }
 }
 
 /// Where a manifest's errors point: its path, and the line of an offset in its text.
@@ -262,6 +313,7 @@ fn configurations(
     at: &Locator,
     raw: &RawManifest,
     scaling: Scaling,
+    repetitions: [u32; BackendKind::ALL.len()],
     machine: &Machine,
 ) -> Result<Vec<Configuration>, ManifestError> {
     let backends = backend_list(raw.backends.get_ref(), machine)
@@ -311,6 +363,7 @@ fn configurations(
                     backend,
                     workers,
                     oversubscribe: raw.backends.get_ref().oversubscribe,
+                    repetitions: repetitions[backend as usize],
                     footprint,
                 };
                 if !seen.insert(configuration.key()) {
@@ -615,6 +668,54 @@ mod tests {
                 (Some(200), Some(0.2), "serial".into(), 1)
             ]
         );
+    }
+
+    #[test]
+    fn repetitions_are_one_count_or_a_table_by_backend() {
+        let counts = |study: Study| -> Vec<(String, u32)> {
+            study
+                .configurations
+                .iter()
+                .map(|c| (c.backend.name().to_owned(), c.repetitions))
+                .collect()
+        };
+        let backends = "[backends]\nserial = true\nrayon = [1, 2]\nmpi = [2]\n";
+        let owned = |list: &[(&str, u32)]| -> Vec<(String, u32)> {
+            list.iter().map(|&(b, n)| (b.to_owned(), n)).collect()
+        };
+        let every = study(&format!("repetitions = 4\n{backends}"));
+        assert_eq!(every.rounds(), 4);
+        assert_eq!(
+            counts(every),
+            owned(&[("serial", 4), ("rayon", 4), ("rayon", 4), ("mpi", 4)])
+        );
+        let by_backend = study(&format!("{backends}[repetitions]\nmpi = 9\nserial = 5\n"));
+        assert_eq!(by_backend.rounds(), 9);
+        assert_eq!(
+            counts(by_backend),
+            owned(&[("serial", 5), ("rayon", 3), ("rayon", 3), ("mpi", 9)])
+        );
+        assert_eq!(study(backends).rounds(), 3);
+        for (bad, says) in [
+            (
+                "repetitions = { gpu = 2 }",
+                "`repetitions.gpu` names no backend; the table takes serial, rayon, mpi",
+            ),
+            (
+                "repetitions = { mpi = 0 }",
+                "`repetitions.mpi` is 0; give a whole number of at least 1",
+            ),
+            (
+                "repetitions = 2.5",
+                "`repetitions` is 2.5; give a whole number of at least 1",
+            ),
+        ] {
+            let text = format!("name = \"m\"\n{bad}\n{backends}{INLINE}");
+            let err = parse(Path::new("m.toml"), &text, &MACHINE)
+                .unwrap_err()
+                .to_string();
+            assert_eq!(err, format!("m.toml:2: {says}"));
+        }
     }
 
     #[test]

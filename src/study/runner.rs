@@ -43,7 +43,15 @@ pub struct RunOptions {
     /// Time the calibration workload (`collide calibrate`) before every round of
     /// repetitions, interleaved with the configurations.
     pub calibrate: bool,
+    /// Ask OpenMPI's ranks to yield the CPU while they wait ([`YIELD_WHEN_IDLE`]) instead
+    /// of polling, unless the environment already says: the check's MPI timings vary
+    /// less from run to run that way on a machine with as many cores as ranks.
+    pub mpi_yields_when_idle: bool,
 }
+
+/// The OpenMPI setting (an environment variable `mpirun` passes to its ranks) that makes
+/// a waiting rank yield the CPU; other MPIs ignore it.
+pub const YIELD_WHEN_IDLE: &str = "OMPI_MCA_mpi_yield_when_idle";
 
 /// A `collide` program that runs the repetitions of a study.
 #[derive(Clone, Debug)]
@@ -157,19 +165,25 @@ pub fn run_study(
 
     note_configurations(&configurations, &environment, &note);
     let scene_files = materialize_scenes(&dir, &configurations)?;
-    let todo: Vec<(u32, usize)> = (0..study.repetitions)
+    let todo: Vec<(u32, usize)> = (0..study.rounds())
         .flat_map(|rep| (0..configurations.len()).map(move |c| (rep, c)))
+        .filter(|&(rep, c)| rep < configurations[c].repetitions)
         .filter(|&(rep, c)| !done.contains(&(configurations[c].key(), rep)))
         .collect();
     let warm: BTreeSet<usize> = todo.iter().map(|&(_, c)| c).collect();
     let n_programs = options.programs.len();
     let total = (n_programs * (warm.len() * study.warmups as usize + todo.len())) as u64;
     let progress = progress_bar(quiet, total);
+    let counts = configurations.iter().map(|c| c.repetitions);
+    let (fewest, most) = (counts.clone().min().unwrap_or(0), counts.max().unwrap_or(0));
     note(&format!(
         "study {}: {} configurations × {} repetitions (+{} warm-up each) → {}",
         study.name,
         configurations.len(),
-        study.repetitions,
+        match fewest == most {
+            true => most.to_string(),
+            false => format!("{fewest}–{most}"),
+        },
         study.warmups,
         results.display()
     ));
@@ -177,6 +191,7 @@ pub fn run_study(
     let children = Children {
         exe: this_exe()?,
         timeout: study.timeout,
+        mpi_yields_when_idle: options.mpi_yields_when_idle,
     };
     let started_utc = records::utc_now();
     children.warm_up(
@@ -279,6 +294,7 @@ fn interrupted_note(rows: &[Record], results: &Path, continue_with: &str) -> Opt
 struct Children {
     exe: PathBuf,
     timeout: Duration,
+    mpi_yields_when_idle: bool,
 }
 
 impl Children {
@@ -295,6 +311,12 @@ impl Children {
             .arg(scene)
             .args(configuration.simulate_args())
             .args(program.slowdown.simulate_args(configuration.backend));
+        if self.mpi_yields_when_idle
+            && configuration.backend == BackendKind::Mpi
+            && std::env::var_os(YIELD_WHEN_IDLE).is_none()
+        {
+            command.env(YIELD_WHEN_IDLE, "1");
+        }
         run_with_timeout(command, self.timeout)
     }
 
