@@ -7,7 +7,7 @@
 use std::ops::Range;
 
 use super::particles::Particles;
-use super::scene::{Boundary, Domain};
+use super::scene::{Boundary, Domain, minimum_image};
 
 /// An overlapping pair. `a` is the storage index of the disk with the lower id.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -553,10 +553,15 @@ impl StripGrid {
         let reach = rounded_up(self.layout.reach + slack);
         let width = self.layout.width as f32;
         let near_limit = 2.0 * self.layout.max_radius + skin + slack;
-        let near_sq = near_limit * near_limit;
+        // In f32, as the entries: the slack covers the few roundings of this test too.
+        let near_sq = rounded_up(near_limit * near_limit);
+        let height = domain.height as f32;
         let near = |a: &Entry, b: &Entry| {
-            let (ax, ay, bx, by) = (a.x.into(), a.y.into(), b.x.into(), b.y.into());
-            let (dx, dy) = domain.separation_in::<PERIODIC>(ax, ay, bx, by);
+            let (dx, dy) = (b.x - a.x, b.y - a.y);
+            let (dx, dy) = match PERIODIC {
+                true => (minimum_image(dx, width), minimum_image(dy, height)),
+                false => (dx, dy),
+            };
             dx * dx + dy * dy < near_sq
         };
         // With a skin of 0, `r_a + r_b + skin` is the contact distance itself: adding 0.0

@@ -396,8 +396,48 @@ mod tests {
     use crate::sim::grid::{Contact, StripGrid};
     use crate::sim::particles::Particles;
     use crate::sim::scene::Scene;
-    use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution};
+    use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution, wrap_periodic};
     use crate::sim::{Boundary, Broadphase, Physics, StepParams, Stepper};
+
+    /// The marks of a block are the disks that moved at least the escape distance, or
+    /// went astray, bit i for disk i: full blocks and short ones, at walls and through
+    /// a periodic edge.
+    #[test]
+    fn escapee_marks_are_the_disks_that_moved_the_escape_distance() {
+        use crate::sim::neighbours::mark_escapees;
+        use crate::sim::scene::Domain;
+        for boundary in [Boundary::Walls, Boundary::Periodic] {
+            let domain = Domain {
+                width: 100.0,
+                height: 50.0,
+                boundary,
+            };
+            for n in [1, 7, 8, 9, 31, 63, 64] {
+                // Disk i moves by 0, 0.5, 1 or 1.5 (escaping at 0.9); disk 5 goes astray.
+                let moved = |i: usize| 0.5 * (i % 4) as f64;
+                let x0: Vec<f64> = (0..n).map(|i| 99.5 - 0.1 * i as f64).collect();
+                let y0: Vec<f64> = (0..n).map(|i| 0.2 + 0.7 * i as f64).collect();
+                let mut x: Vec<f64> = (0..n).map(|i| x0[i] + 0.6 * moved(i)).collect();
+                let y: Vec<f64> = (0..n).map(|i| y0[i] - 0.8 * moved(i)).collect();
+                if boundary == Boundary::Periodic {
+                    // Across the east edge: the move is the same.
+                    x.iter_mut()
+                        .for_each(|x| *x = wrap_periodic(*x, domain.width));
+                }
+                if n > 5 {
+                    x[5] = f64::NAN;
+                }
+                let expected = (0..n)
+                    .filter(|&i| moved(i) >= 1.0 || i == 5)
+                    .fold(0_u64, |bits, i| bits | 1 << i);
+                let marks = match boundary {
+                    Boundary::Walls => mark_escapees::<false>(&x, &y, &x0, &y0, &domain, 0.81),
+                    Boundary::Periodic => mark_escapees::<true>(&x, &y, &x0, &y0, &domain, 0.81),
+                };
+                assert_eq!(marks, expected, "{boundary:?}, {n} disks");
+            }
+        }
+    }
 
     /// Every step, the stepper's lists (with their rebuilds and escapee queries) find
     /// exactly the pairs a fresh search of the whole box finds: walls and periodic,

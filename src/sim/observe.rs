@@ -26,6 +26,7 @@ pub fn observe(particles: &Particles) -> Observables {
     let mut momentum = [0.0, 0.0];
     // Fixed order (by id): floating-point sums are not associative.
     for idx in particles.storage_index_by_id() {
+        let idx = idx as usize;
         let (m, vx, vy) = (particles.mass[idx], particles.vx[idx], particles.vy[idx]);
         kinetic_energy += 0.5 * m * (vx * vx + vy * vy);
         momentum[0] += m * vx;
@@ -90,6 +91,7 @@ pub fn thermodynamics(
 pub fn state_hash(particles: &Particles) -> String {
     let mut hasher = Xxh3::new();
     for idx in particles.storage_index_by_id() {
+        let idx = idx as usize;
         for value in [
             particles.x[idx],
             particles.y[idx],

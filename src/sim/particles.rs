@@ -110,11 +110,12 @@ impl Particles {
         }
     }
 
-    /// Storage indices in id order: `order[id]` is where disk `id` is stored.
-    pub fn storage_index_by_id(&self) -> Vec<usize> {
+    /// Storage indices in id order: `order[id]` is where disk `id` is stored (as `u32`,
+    /// like the ids: half the memory of `usize` in a scene of 10⁸ disks).
+    pub fn storage_index_by_id(&self) -> Vec<u32> {
         let mut order = vec![0; self.len()];
         for (idx, &id) in self.id.iter().enumerate() {
-            order[id as usize] = idx;
+            order[id as usize] = idx as u32;
         }
         order
     }
@@ -123,7 +124,7 @@ impl Particles {
     pub fn disks_by_id(&self) -> Vec<Disk> {
         self.storage_index_by_id()
             .into_iter()
-            .map(|idx| self.disk(idx))
+            .map(|idx| self.disk(idx as usize))
             .collect()
     }
 

@@ -85,11 +85,23 @@ impl Domain {
     }
 }
 
+/// `d` as its shortest periodic image along a side of `length`: in f64 for positions,
+/// and in f32 for the strip grid's rounded entries ([`crate::sim::grid`]).
 #[inline(always)]
-fn minimum_image(d: f64, length: f64) -> f64 {
-    if d > 0.5 * length {
+pub fn minimum_image<T>(d: T, length: T) -> T
+where
+    T: Copy
+        + PartialOrd
+        + From<f32>
+        + std::ops::Add<Output = T>
+        + std::ops::Sub<Output = T>
+        + std::ops::Mul<Output = T>
+        + std::ops::Neg<Output = T>,
+{
+    let half = T::from(0.5) * length;
+    if d > half {
         d - length
-    } else if d < -0.5 * length {
+    } else if d < -half {
         d + length
     } else {
         d
