@@ -53,22 +53,22 @@ pub struct Measured {
 /// rates from the last, the first to time them with the state cold in the caches).
 /// The step method's rates are the median of three later runs of
 /// `cargo bench --features mpi --bench kernels -- '^step/'` on the same machine, idle
-/// (2026-11-24, 10:54–11:01 UTC; the runs differed by up to 5%), after resolution
-/// began to read nearby memory and the strip grid's entries shrank to f32
-/// (docs/performance.md, 10:53 UTC).
+/// (2026-11-24, 14:34–14:38 UTC; the runs differed by up to 8%), after the strip scan's
+/// first test went to f32 (docs/performance.md, 14:30 UTC); they moved by at most 3%
+/// from the rates of 10:54 UTC.
 /// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [
-        measured(1e4, 0.05, 94.5e6, 0.947e6, 432e6),
-        measured(1e4, 0.3, 55.0e6, 1.49e6, 457e6),
+        measured(1e4, 0.05, 94.4e6, 0.947e6, 432e6),
+        measured(1e4, 0.3, 53.4e6, 1.49e6, 457e6),
     ],
     [
-        measured(1e5, 0.05, 87.3e6, 0.235e6, 68.0e6),
-        measured(1e5, 0.3, 47.8e6, 0.612e6, 90.6e6),
+        measured(1e5, 0.05, 87.0e6, 0.235e6, 68.0e6),
+        measured(1e5, 0.3, 49.0e6, 0.612e6, 90.6e6),
     ],
     [
-        measured(1e6, 0.05, 65.7e6, 0.190e6, 79.6e6),
-        measured(1e6, 0.3, 36.7e6, 0.456e6, 110e6),
+        measured(1e6, 0.05, 65.9e6, 0.190e6, 79.6e6),
+        measured(1e6, 0.3, 36.5e6, 0.456e6, 110e6),
     ],
 ];
 
