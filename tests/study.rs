@@ -98,19 +98,9 @@ fn a_study_records_every_repetition_and_resume_runs_only_what_is_missing() {
             .all(|r| r.status == "ok" && r.study == "tiny" && r.n == 200)
     );
     assert!(rows.iter().all(|r| r.state_hash == rows[0].state_hash));
-    let mut reps: Vec<(String, u32)> = rows
-        .iter()
-        .map(|r| (r.backend.clone(), r.repetition))
-        .collect();
-    reps.sort();
     assert_eq!(
-        reps,
-        [
-            ("rayon".into(), 0),
-            ("rayon".into(), 1),
-            ("serial".into(), 0),
-            ("serial".into(), 1)
-        ]
+        backend_repetitions(&rows),
+        [("rayon", 0), ("rayon", 1), ("serial", 0), ("serial", 1)].map(|(b, r)| (b.to_owned(), r))
     );
 
     // As if the study had been killed after its first run: resume runs the other three.
@@ -139,29 +129,13 @@ fn a_study_records_every_repetition_and_resume_runs_only_what_is_missing() {
 
 #[test]
 fn repetitions_by_backend_measure_each_backend_as_often_as_asked() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("results");
-    let path = manifest(
-        dir.path(),
-        &format!("warmups = 0\nrepetitions = {{ serial = 3, rayon = 1 }}\n{BACKENDS}"),
+    let (_dir, _, rows) = tiny_study(&format!(
+        "warmups = 0\nrepetitions = {{ serial = 3, rayon = 1 }}\n{BACKENDS}"
+    ));
+    assert_eq!(
+        backend_repetitions(&rows),
+        [("rayon", 0), ("serial", 0), ("serial", 1), ("serial", 2)].map(|(b, r)| (b.to_owned(), r))
     );
-    let ran = run_study(&path, &out, &[]);
-    assert!(
-        ran.status.success(),
-        "{}",
-        String::from_utf8_lossy(&ran.stderr)
-    );
-    let parquet = records::files_in(&out.join("tiny")).unwrap();
-    let mut reps: Vec<(String, u32)> = records::read(&parquet[0])
-        .unwrap()
-        .iter()
-        .map(|r| (r.backend.clone(), r.repetition))
-        .collect();
-    reps.sort();
-    let expected: Vec<(String, u32)> = [("rayon", 0), ("serial", 0), ("serial", 1), ("serial", 2)]
-        .map(|(backend, rep)| (backend.to_owned(), rep))
-        .to_vec();
-    assert_eq!(reps, expected);
 }
 
 #[test]
@@ -252,6 +226,16 @@ fn drawing_with_mpi_is_refused_in_a_manifest_and_on_the_command_line() {
         stderr.contains("--draw") && stderr.contains("drop --backend mpi"),
         "{stderr}"
     );
+}
+
+/// The (backend, repetition) of every row, sorted.
+fn backend_repetitions(rows: &[Record]) -> Vec<(String, u32)> {
+    let mut reps: Vec<(String, u32)> = rows
+        .iter()
+        .map(|r| (r.backend.clone(), r.repetition))
+        .collect();
+    reps.sort();
+    reps
 }
 
 /// The tiny study with `body` run in a temporary folder, which must succeed: the folder,

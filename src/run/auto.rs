@@ -53,8 +53,8 @@ pub struct Measured {
 /// rates from the last, the first to time them with the state cold in the caches).
 /// The step method's rates are the median of three later runs of
 /// `cargo bench --features mpi --bench kernels -- '^step/'` on the same machine, idle
-/// (2026-11-24, 14:34–14:38 UTC; the runs differed by up to 8%), after the strip scan's
-/// first test went to f32 (docs/performance.md, 14:30 UTC); they moved by at most 3%
+/// (2026-11-24, 14:34–14:38 UTC; the runs differed by up to 12%), after the strip scan's
+/// first test went to f32 (docs/performance.md, 14:38 UTC); they moved by at most 3%
 /// from the rates of 10:54 UTC.
 /// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [

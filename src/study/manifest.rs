@@ -212,19 +212,12 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
     let name = raw.name.get_ref().trim().to_owned();
     check_name(&name)
         .map_err(|reason| at.invalid(raw.name.span().start, format!("`name` {reason}")))?;
-    let count = |value: &Option<Spanned<i64>>, field: &str, default: i64, min: i64| {
-        let v = value.as_ref().map_or(default, |v| *v.get_ref());
-        if v < min {
-            let offset = value.as_ref().map_or(0, |v| v.span().start);
-            return Err(at.invalid(
-                offset,
-                format!("`{field}` is {v}; give a whole number of at least {min}"),
-            ));
-        }
-        Ok(v as u32)
-    };
     let repetitions = repetitions_by_backend(&at, raw.repetitions.as_ref())?;
-    let warmups = count(&raw.warmups, "warmups", 1, 0)?;
+    let warmups = match &raw.warmups {
+        None => 1,
+        Some(warmups) => count_of("warmups", &toml::Value::from(*warmups.get_ref()), 0)
+            .map_err(|message| at.invalid(warmups.span().start, message))?,
+    };
     let timeout_s = raw.timeout_s.as_ref().map_or(600.0, |t| *t.get_ref());
     if !(timeout_s > 0.0 && timeout_s.is_finite()) {
         let offset = raw.timeout_s.as_ref().map_or(0, |t| t.span().start);
@@ -261,13 +254,7 @@ fn repetitions_by_backend(
         return Ok([DEFAULT; BackendKind::ALL.len()]);
     };
     let invalid = |message: String| at.invalid(value.span().start, message);
-    let count = |field: String, count: &toml::Value| match count.as_integer() {
-        Some(count) if count >= 1 => u32::try_from(count)
-            .map_err(|_| invalid(format!("`{field}` is {count}; give at most {}", u32::MAX))),
-        _ => Err(invalid(format!(
-            "`{field}` is {count}; give a whole number of at least 1"
-        ))),
-    };
+    let count = |field: String, count: &toml::Value| count_of(&field, count, 1).map_err(invalid);
     match value.get_ref() {
         toml::Value::Table(table) => {
             let mut counts = [DEFAULT; BackendKind::ALL.len()];
@@ -285,6 +272,21 @@ fn repetitions_by_backend(
         }
         other => Ok([count("repetitions".to_owned(), other)?; BackendKind::ALL.len()]),
     }
+}
+
+/// `value` of `field` as a count: a whole number from `min` up (at most `u32::MAX`), or
+/// what is wrong with it.
+fn count_of(field: &str, value: &toml::Value, min: i64) -> Result<u32, String> {
+    value
+        .as_integer()
+        .filter(|&count| count >= min)
+        .and_then(|count| u32::try_from(count).ok())
+        .ok_or_else(|| {
+            format!(
+                "`{field}` is {value}; give a whole number of at least {min} (at most {})",
+                u32::MAX
+            )
+        })
 }
 
 /// Where a manifest's errors point: its path, and the line of an offset in its text.
@@ -671,7 +673,7 @@ mod tests {
     }
 
     #[test]
-    fn repetitions_are_one_count_or_a_table_by_backend() {
+    fn repetitions_are_one_count_or_a_table_by_backend_and_counts_are_checked() {
         let counts = |study: Study| -> Vec<(String, u32)> {
             study
                 .configurations
@@ -703,11 +705,19 @@ mod tests {
             ),
             (
                 "repetitions = { mpi = 0 }",
-                "`repetitions.mpi` is 0; give a whole number of at least 1",
+                "`repetitions.mpi` is 0; give a whole number of at least 1 (at most 4294967295)",
             ),
             (
                 "repetitions = 2.5",
-                "`repetitions` is 2.5; give a whole number of at least 1",
+                "`repetitions` is 2.5; give a whole number of at least 1 (at most 4294967295)",
+            ),
+            (
+                "repetitions = { mpi = 5000000000 }",
+                "`repetitions.mpi` is 5000000000; give a whole number of at least 1 (at most 4294967295)",
+            ),
+            (
+                "warmups = -1",
+                "`warmups` is -1; give a whole number of at least 0 (at most 4294967295)",
             ),
         ] {
             let text = format!("name = \"m\"\n{bad}\n{backends}{INLINE}");

@@ -191,7 +191,9 @@ pub fn run_study(
     let children = Children {
         exe: this_exe()?,
         timeout: study.timeout,
-        mpi_yields_when_idle: options.mpi_yields_when_idle,
+        // The environment's own setting, if any, wins.
+        mpi_yields_when_idle: options.mpi_yields_when_idle
+            && std::env::var_os(YIELD_WHEN_IDLE).is_none(),
     };
     let started_utc = records::utc_now();
     children.warm_up(
@@ -294,6 +296,7 @@ fn interrupted_note(rows: &[Record], results: &Path, continue_with: &str) -> Opt
 struct Children {
     exe: PathBuf,
     timeout: Duration,
+    /// Start MPI runs with [`YIELD_WHEN_IDLE`] set.
     mpi_yields_when_idle: bool,
 }
 
@@ -311,10 +314,7 @@ impl Children {
             .arg(scene)
             .args(configuration.simulate_args())
             .args(program.slowdown.simulate_args(configuration.backend));
-        if self.mpi_yields_when_idle
-            && configuration.backend == BackendKind::Mpi
-            && std::env::var_os(YIELD_WHEN_IDLE).is_none()
-        {
+        if self.mpi_yields_when_idle && configuration.backend == BackendKind::Mpi {
             command.env(YIELD_WHEN_IDLE, "1");
         }
         run_with_timeout(command, self.timeout)
