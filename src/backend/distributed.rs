@@ -29,7 +29,7 @@ use crate::sim::neighbours::{PairList, Skin, larger};
 use crate::sim::observe::observe;
 use crate::sim::particles::PACKED_LEN;
 use crate::sim::resolve::resolve_contacts;
-use crate::sim::schedule::ContactSchedule;
+use crate::sim::schedule::{ContactSchedule, DiskSet};
 use crate::sim::step::{FIRST_BUILDS_SINCE_REORDER, REORDER_INTERVAL, advance_disks};
 use crate::sim::{Boundary, Particles, StepCounters};
 
@@ -188,6 +188,9 @@ struct RankState {
     skin: Skin,
     /// The pairs the slab's strips found (own disks, then ghosts) at the last build.
     list: PairList,
+    /// The own disks in the slab's first strip at the last build, when a rank below
+    /// sees them as its ghosts.
+    exported: DiskSet,
     builds_since_reorder: u32,
     movers: Vec<Entry>,
     contacts: Vec<Contact>,
@@ -250,6 +253,7 @@ impl RankState {
             movers: Vec::new(),
             contacts: Vec::new(),
             shared: Vec::new(),
+            exported: DiskSet::default(),
             schedule: ContactSchedule::default(),
             counters: StepCounters::default(),
             shared_counters: StepCounters::default(),
@@ -287,6 +291,7 @@ impl RankState {
             timed(&mut stages.broad_phase, || {
                 self.migrate(comm.size(), &immigrants);
                 self.skin.record(&self.particles);
+                self.mark_exported();
             });
         }
         let ghosts = timed(&mut stages.communication, || {
@@ -376,6 +381,23 @@ impl RankState {
         }
     }
 
+    /// Notes which own disks the rank below will see as ghosts until the next build.
+    fn mark_exported(&mut self) {
+        self.exported.clear(self.particles.len());
+        if self.export_to.is_some() {
+            for entry in self.grid.strip_entries(self.slab.start) {
+                self.exported.insert(entry.idx());
+            }
+        }
+        debug_assert!(
+            (0..self.particles.len()).all(|disk| {
+                let first = self.layout.strip_of(self.particles.y[disk]) == self.slab.start;
+                self.exported.contains(disk as u32) == (self.export_to.is_some() && first)
+            }),
+            "the first strip's entries are the own disks built there"
+        );
+    }
+
     /// The disks of the slab's first strip, in x order, packed for the rank below.
     fn halo(&self, n_ranks: usize) -> Vec<Vec<f64>> {
         let mut outgoing = vec![Vec::new(); n_ranks];
@@ -413,14 +435,10 @@ impl RankState {
         self.contacts.clear();
         self.list
             .find_contacts(&self.particles, &self.domain, &mut self.contacts);
-        let (particles, layout, first) = (&self.particles, &self.layout, self.slab.start);
-        let (exporting, skin) = (self.export_to.is_some(), &self.skin);
+        let (particles, exported) = (&self.particles, &self.exported);
         // Ghosts and exported disks (those of the first strip at the build) are seen by
         // another rank too: their chains are shared.
-        let seen_elsewhere = |disk: u32| {
-            let exported = || layout.strip_of(skin.built_position(disk as usize).1) == first;
-            disk as usize >= n_own || (exporting && exported())
-        };
+        let seen_elsewhere = |disk: u32| disk as usize >= n_own || exported.contains(disk);
         self.shared.clear();
         self.schedule.split(
             particles.len(),

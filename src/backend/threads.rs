@@ -31,7 +31,7 @@ use crate::sim::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin};
 use crate::sim::observe::observe;
 use crate::sim::prefetch::prefetch;
 use crate::sim::resolve::resolve_contacts;
-use crate::sim::schedule::ContactSchedule;
+use crate::sim::schedule::{ContactSchedule, DiskSet};
 use crate::sim::step::{FIRST_BUILDS_SINCE_REORDER, REORDER_INTERVAL, advance_disks};
 use crate::sim::{Broadphase, DiskSlices, Domain, Particles, Physics, StepCounters, StepParams};
 
@@ -118,9 +118,9 @@ pub struct ThreadedStepper {
     skin: Skin,
     /// Per band of the last build: the candidate pairs its strips found.
     lists: Vec<PairList>,
-    /// Per strip: whether it was the first strip of a band at the last build (with more
-    /// than one band). Only a disk there can be in two bands' lists.
-    first_of_band: Vec<bool>,
+    /// The disks in the first strip of a band at the last build (with more than one
+    /// band). Only such a disk can be in two bands' lists.
+    in_first_strips: DiskSet,
     /// Per disk: in a pair an escapee's query found this step (all false between steps).
     touched: Vec<bool>,
     builds_since_reorder: u32,
@@ -156,7 +156,7 @@ impl ThreadedStepper {
             grid: StripGrid::with_skin(&domain, particles, skin.width()),
             skin,
             lists: Vec::new(),
-            first_of_band: Vec::new(),
+            in_first_strips: DiskSet::default(),
             touched: Vec::new(),
             builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
             movers: Vec::new(),
@@ -245,13 +245,8 @@ impl ThreadedStepper {
                 // A disk in a band's first strip at the build may also be in the list of
                 // the band below (its north strip), or of the last band (periodic wrap).
                 // So may a disk in a contact found by an escapee's query.
-                let layout = *self.grid.layout();
-                let (first_of_band, skin) = (&self.first_of_band, &self.skin);
-                let touched = &self.touched;
-                let pinned = |disk: u32| {
-                    let (_, y_built) = skin.built_position(disk as usize);
-                    first_of_band[layout.strip_of(y_built)] || touched[disk as usize]
-                };
+                let (in_first_strips, touched) = (&self.in_first_strips, &self.touched);
+                let pinned = |disk: u32| in_first_strips.contains(disk) || touched[disk as usize];
                 let (domain, particles) = (&self.domain, &*particles);
                 self.lists
                     .par_iter()
@@ -329,12 +324,20 @@ impl ThreadedStepper {
     /// the positions they were built at.
     fn rebuild_lists(&mut self, particles: &mut Particles) {
         let bands = self.build_grid(particles);
-        self.first_of_band.clear();
-        self.first_of_band
-            .resize(self.grid.layout().n_strips, false);
+        self.in_first_strips.clear(particles.len());
         for band in bands.iter().filter(|_| bands.len() > 1) {
-            self.first_of_band[band.start] = true;
+            for entry in self.grid.strip_entries(band.start) {
+                self.in_first_strips.insert(entry.idx());
+            }
         }
+        debug_assert!(
+            (0..particles.len()).all(|disk| {
+                let strip = self.grid.layout().strip_of(particles.y[disk]);
+                let first = bands.len() > 1 && bands.iter().any(|band| band.start == strip);
+                self.in_first_strips.contains(disk as u32) == first
+            }),
+            "the first strips' entries are the disks built there"
+        );
         self.lists.resize_with(bands.len(), PairList::default);
         let (grid, domain, skin, particles_now) =
             (&self.grid, &self.domain, &self.skin, &*particles);

@@ -296,11 +296,6 @@ impl Skin {
             .resize(particles.len().div_ceil(DISPLACEMENT_BLOCK), 0);
         self.tracked = false;
     }
-
-    /// Where the disk stored at `idx` was at the last build: `(x, y)`.
-    pub fn built_position(&self, idx: usize) -> (f64, f64) {
-        (self.x_built[idx], self.y_built[idx])
-    }
 }
 
 /// One list of candidate pairs (storage indices), in the order the grid found them.

@@ -35,6 +35,31 @@ pub struct ResolutionOrder {
     chained: Vec<Contact>,
 }
 
+/// A set of disks by storage index, one bit each: the disks of a worker's edge strip at
+/// the last build, which [`ContactSchedule::split`] pins. Marked once per build, it is
+/// read for every disk in a contact: a bit in a small array, not the disk's position at
+/// the build in a large one.
+#[derive(Clone, Debug, Default)]
+pub struct DiskSet {
+    words: Vec<u64>,
+}
+
+impl DiskSet {
+    /// Empties the set, for storage indices below `n_particles`.
+    pub fn clear(&mut self, n_particles: usize) {
+        self.words.clear();
+        self.words.resize(n_particles.div_ceil(64), 0);
+    }
+
+    pub fn insert(&mut self, disk: u32) {
+        self.words[disk as usize / 64] |= 1 << (disk % 64);
+    }
+
+    pub fn contains(&self, disk: u32) -> bool {
+        self.words[disk as usize / 64] & (1 << (disk % 64)) != 0
+    }
+}
+
 impl ResolutionOrder {
     /// Orders `contacts` (whole chains, as found, possibly with a pair twice) for
     /// resolution with the canonical bits: first the pairs that share no disk with
@@ -135,6 +160,19 @@ mod tests {
             a,
             b,
         }
+    }
+
+    #[test]
+    fn a_disk_set_holds_what_was_inserted_until_cleared() {
+        let mut set = DiskSet::default();
+        set.clear(130);
+        for disk in [0, 63, 64, 129] {
+            set.insert(disk);
+        }
+        let held: Vec<u32> = (0..130).filter(|&disk| set.contains(disk)).collect();
+        assert_eq!(held, vec![0, 63, 64, 129]);
+        set.clear(130);
+        assert!((0..130).all(|disk| !set.contains(disk)));
     }
 
     #[test]
