@@ -30,7 +30,27 @@ scene = "experiments/scenes/seed-1000.toml"
 cases = [(100000, 0.05, 100), (100000, 0.3, 100), (1000000, 0.05, 50), (1000000, 0.3, 50)]
 backends = [("serial", []), ("rayon2", ["--backend", "rayon", "--threads", "2"]),
             ("mpi2", ["--backend", "mpi", "--ranks", "2"])]
-ours, yardstick = {}, {}
+ours, yardstick, hashes = {}, {}, {}
+
+
+def simulate(n, packing, steps, args=()):
+    """A `collide simulate --json` of the case, started: wait for it with `rate`."""
+    return subprocess.Popen([collide, "simulate", scene, "--n", str(n), "--packing",
+                             str(packing), "--steps", str(steps), "--seed", "42", "--json",
+                             *args], env=env, stdout=subprocess.PIPE, text=True)
+
+
+def rate(n, packing, run):
+    """The rate (M particle-steps/s) of a started `simulate`; its state hash goes to
+    `hashes`."""
+    out, _ = run.communicate()
+    if run.returncode != 0:
+        sys.exit(f"collide simulate failed with exit code {run.returncode}")
+    result = json.loads(out.strip().splitlines()[-1])
+    hashes.setdefault((n, packing), set()).add(result["state_hash"])
+    return result["particle_steps_per_s"] / 1e6
+
+
 for _ in range(reps):
     out = subprocess.run([bench], env=dict(env, COLLIDE_YARDSTICK_ONLY="1"),
                          capture_output=True, text=True, check=True).stdout
@@ -40,29 +60,19 @@ for _ in range(reps):
             yardstick.setdefault((int(words[1]), float(words[2])), []).append(float(words[4]))
     for n, packing, steps in cases:
         for name, args in backends:
-            run = subprocess.run([collide, "simulate", scene, "--n", str(n), "--packing",
-                                  str(packing), "--steps", str(steps), "--seed", "42",
-                                  "--json"] + args,
-                                 env=env, capture_output=True, text=True, check=True)
-            summary = json.loads(run.stdout.strip().splitlines()[-1])
             ours.setdefault((n, packing, name), []).append(
-                (summary["particle_steps_per_s"] / 1e6, summary["state_hash"]))
-        together = [subprocess.Popen([collide, "simulate", scene, "--n", str(n), "--packing",
-                                      str(packing), "--steps", str(steps), "--seed", "42",
-                                      "--json"], env=env, stdout=subprocess.PIPE, text=True)
-                    for _ in range(2)]
-        rates = [json.loads(p.communicate()[0].strip().splitlines()[-1])["particle_steps_per_s"]
-                 for p in together]
-        ours.setdefault((n, packing, "two"), []).append((sum(rates) / 1e6, None))
+                rate(n, packing, simulate(n, packing, steps, args)))
+        together = [simulate(n, packing, steps) for _ in range(2)]
+        ours.setdefault((n, packing, "two"), []).append(
+            sum(rate(n, packing, run) for run in together))
 print("| N | packing | yardstick | serial | rayon, 2 threads | MPI, 2 ranks | serial / yardstick "
       "| 2 serial at once / serial | rayon / serial | MPI / serial | hashes agree |")
 print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
 for n, packing, _ in cases:
     y = statistics.median(yardstick[(n, packing)])
-    m = {name: statistics.median(r for r, _ in ours[(n, packing, name)])
+    m = {name: statistics.median(ours[(n, packing, name)])
          for name in [name for name, _ in backends] + ["two"]}
-    hashes = {h for name, _ in backends for _, h in ours[(n, packing, name)]}
     print(f"| {n:.0e} | {packing} | {y:.1f} M/s | {m['serial']:.1f} M/s | {m['rayon2']:.1f} M/s "
           f"| {m['mpi2']:.1f} M/s | {m['serial'] / y:.2f}× | {m['two'] / m['serial']:.2f}× "
           f"| {m['rayon2'] / m['serial']:.2f}× "
-          f"| {m['mpi2'] / m['serial']:.2f}× | {len(hashes) == 1} |")
+          f"| {m['mpi2'] / m['serial']:.2f}× | {len(hashes[(n, packing)]) == 1} |")
