@@ -42,17 +42,23 @@ const MAX_ESCAPEE_SHARE: usize = 64;
 /// the escapees); a query's reach, and cost, grows with the distance.
 const MAX_PATCH_SKINS: f64 = 1.0;
 
-/// A disk escapes a list once it moved this fraction of half the skin: the margin
-/// covers rounding in the displacement and distance arithmetic.
+/// A disk escapes a list once it moved this fraction of half the skin (less the
+/// rounding of the recorded positions, [`Skin::rounding`]): the margin covers rounding
+/// in the displacement and distance arithmetic.
 const SAFE_SKIN_FRACTION: f64 = 0.999;
 
 /// The skin of a scene's lists and the positions they were last built at.
 #[derive(Clone, Debug, Default)]
 pub struct Skin {
     width: f64,
-    /// Positions at the last build, by storage index.
-    x_built: Vec<f64>,
-    y_built: Vec<f64>,
+    /// Positions at the last build, by storage index, rounded to f32: half the memory
+    /// and half the reads of the move that measures the displacements.
+    x_built: Vec<f32>,
+    y_built: Vec<f32>,
+    /// A bound on how far a recorded (rounded) position is from the disk's position at
+    /// the build: every displacement measured from the record is within this of the
+    /// true one, and the escape distance and the largest displacement allow for it.
+    rounding: f64,
     /// Per block of [`DISPLACEMENT_BLOCK`] disks (by storage index): which of them had
     /// moved half the skin since the build, as of the last move (bit i: the block's
     /// disk i).
@@ -69,8 +75,8 @@ pub const DISPLACEMENT_BLOCK: usize = 64;
 /// boundary): where the disks were at the build, how far is half the skin, and the
 /// blocks' marks to fill.
 pub struct Displacements<'a> {
-    pub x_built: &'a [f64],
-    pub y_built: &'a [f64],
+    pub x_built: &'a [f32],
+    pub y_built: &'a [f32],
     /// The square of the distance at which a disk escapes the lists.
     pub escape_sq: f64,
     pub escaped: &'a mut [u64],
@@ -121,8 +127,8 @@ impl<'a> Displacements<'a> {
 pub fn mark_escapees<const PERIODIC: bool>(
     x: &[f64],
     y: &[f64],
-    x0: &[f64],
-    y0: &[f64],
+    x0: &[f32],
+    y0: &[f32],
     domain: &Domain,
     escape_sq: f64,
 ) -> u64 {
@@ -130,7 +136,8 @@ pub fn mark_escapees<const PERIODIC: bool>(
     let (x, y, x0, y0) = (&x[..n], &y[..n], &x0[..n], &y0[..n]);
     let mut escaped = 0;
     for i in 0..n {
-        let (dx, dy) = domain.separation_in::<PERIODIC>(x0[i], y0[i], x[i], y[i]);
+        let (x0, y0) = (f64::from(x0[i]), f64::from(y0[i]));
+        let (dx, dy) = domain.separation_in::<PERIODIC>(x0, y0, x[i], y[i]);
         escaped |= u64::from(has_escaped(dx * dx + dy * dy, escape_sq)) << i;
     }
     escaped
@@ -189,10 +196,12 @@ impl Skin {
         self.x_built.len() == particles.len()
     }
 
-    /// The square of the distance at which a disk escapes the lists (half the skin,
-    /// less a margin for rounding).
+    /// The square of the distance, measured from the recorded positions, at which a
+    /// disk escapes the lists: half the skin, less a margin for rounding and less the
+    /// rounding of the record, so that a disk that did not escape moved less than half
+    /// the skin.
     fn escape_sq(&self) -> f64 {
-        let half = 0.5 * SAFE_SKIN_FRACTION * self.width;
+        let half = (0.5 * SAFE_SKIN_FRACTION * self.width - self.rounding).max(0.0);
         half * half
     }
 
@@ -223,8 +232,8 @@ impl Skin {
         }
     }
 
-    /// The square of the largest distance a disk moved since the last build, if one
-    /// moved half the skin (the lists are stale: [`Skin::is_exceeded`]), and 0 if none
+    /// A bound on the square of the largest distance a disk moved since the last
+    /// build, if one escaped (the lists are stale: [`Skin::is_exceeded`]), and 0 if none
     /// did; infinite before the first build. Reads what the last move marked
     /// ([`Skin::tracking`]), or, if the disks were not moved through it since, marks
     /// now. Afterwards [`Skin::escapees`] may ask which disks escaped.
@@ -238,11 +247,17 @@ impl Skin {
         }
         let mut largest = 0.0;
         self.for_each_escapee(0..particles.len(), |idx| {
-            let (x0, y0) = (self.x_built[idx], self.y_built[idx]);
+            let (x0, y0) = (f64::from(self.x_built[idx]), f64::from(self.y_built[idx]));
             let (dx, dy) = domain.separation(x0, y0, particles.x[idx], particles.y[idx]);
             largest = larger(largest, dx * dx + dy * dy);
         });
-        largest
+        if largest > 0.0 {
+            // Measured from the rounded record: the true distance may be longer.
+            let bound = largest.sqrt() + self.rounding;
+            bound * bound
+        } else {
+            largest
+        }
     }
 
     /// Appends the storage indices, in order, of the disks stored in `range` that moved
@@ -289,8 +304,18 @@ impl Skin {
 
     /// Records the disks' positions as those of a build.
     pub fn record(&mut self, particles: &Particles) {
-        self.x_built.clone_from(&particles.x);
-        self.y_built.clone_from(&particles.y);
+        let rounded = |values: &[f64], record: &mut Vec<f32>| {
+            record.clear();
+            record.extend(values.iter().map(|&value| value as f32));
+        };
+        rounded(&particles.x, &mut self.x_built);
+        rounded(&particles.y, &mut self.y_built);
+        // Rounding to f32 moves a coordinate by at most 2⁻²⁴ of its magnitude (or by a
+        // subnormal step near 0), a position by √2 times that, within 2⁻²³. NaN
+        // coordinates are left out: such a disk escapes by its NaN displacement.
+        let largest = (particles.x.iter().chain(&particles.y))
+            .fold(0.0_f64, |largest, v| largest.max(v.abs()));
+        self.rounding = largest * 2.0_f64.powi(-23) + f64::from(f32::MIN_POSITIVE);
         self.escaped.clear();
         self.escaped
             .resize(particles.len().div_ceil(DISPLACEMENT_BLOCK), 0);
@@ -425,11 +450,78 @@ mod tests {
                 let expected = (0..n)
                     .filter(|&i| moved(i) >= 1.0 || i == 5)
                     .fold(0_u64, |bits, i| bits | 1 << i);
+                // Recorded as the lists record them, rounded to f32.
+                let x0: Vec<f32> = x0.iter().map(|&x| x as f32).collect();
+                let y0: Vec<f32> = y0.iter().map(|&y| y as f32).collect();
                 let marks = match boundary {
                     Boundary::Walls => mark_escapees::<false>(&x, &y, &x0, &y0, &domain, 0.81),
                     Boundary::Periodic => mark_escapees::<true>(&x, &y, &x0, &y0, &domain, 0.81),
                 };
                 assert_eq!(marks, expected, "{boundary:?}, {n} disks");
+            }
+        }
+    }
+
+    /// The record of build positions is rounded to f32, which far from the origin is
+    /// coarse (steps of 2 near x = 2²⁴): still, every disk that truly moved half the skin
+    /// is marked, and the largest displacement reported bounds the true one, at walls
+    /// and through a periodic edge.
+    #[test]
+    fn a_rounded_record_misses_no_escapee_far_from_the_origin() {
+        use crate::sim::neighbours::Skin;
+        use crate::sim::particles::Disk;
+        use crate::sim::scene::Domain;
+        for boundary in [Boundary::Walls, Boundary::Periodic] {
+            let domain = Domain {
+                width: 16_777_216.0,
+                height: 64.0,
+                boundary,
+            };
+            let skin_width = 12.0;
+            // Disks along the east edge, at positions f32 cannot hold, each moving a
+            // different fraction of 0 to 1.2 half skins in a different direction.
+            let n = 500;
+            let disk = |i: usize| {
+                let x = domain.width - 1.0 - 0.3 * i as f64 - 0.1234567;
+                Disk {
+                    x,
+                    y: 2.0 + 0.1 * i as f64,
+                    vx: 0.0,
+                    vy: 0.0,
+                    radius: 1.0,
+                    mass: 1.0,
+                }
+            };
+            let built = Particles::from_disks(&(0..n).map(disk).collect::<Vec<_>>());
+            let mut skin = Skin::with_width(skin_width);
+            skin.record(&built);
+            let mut moved = built.clone();
+            let mut true_largest: f64 = 0.0;
+            let mut escaped = Vec::new();
+            for i in 0..n {
+                let distance = 1.2 * 0.5 * skin_width * i as f64 / n as f64;
+                let angle = 0.37 * i as f64;
+                let x = built.x[i] + distance * angle.cos();
+                moved.x[i] = match boundary {
+                    Boundary::Walls => x,
+                    Boundary::Periodic => wrap_periodic(x, domain.width),
+                };
+                moved.y[i] = built.y[i] + distance * angle.sin();
+                true_largest = true_largest.max(distance);
+                if distance >= 0.5 * skin_width {
+                    escaped.push(i as u32);
+                }
+            }
+            let largest_sq = skin.largest_displacement_sq(&moved, &domain);
+            assert!(
+                largest_sq >= true_largest * true_largest,
+                "{boundary:?}: reported {} for a true {true_largest}",
+                largest_sq.sqrt()
+            );
+            let mut marked = Vec::new();
+            skin.escapees(0..n, &mut marked);
+            for idx in &escaped {
+                assert!(marked.contains(idx), "{boundary:?}: disk {idx} is marked");
             }
         }
     }

@@ -309,7 +309,7 @@ fn advance_block<const PERIODIC: bool>(
     domain: &Domain,
     physics: &Physics,
     dt: f64,
-    record: Option<(&[f64], &[f64], &mut u64, f64)>,
+    record: Option<(&[f32], &[f32], &mut u64, f64)>,
     walls: &mut StepCounters,
 ) {
     match physics.gravity {
