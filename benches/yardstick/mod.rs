@@ -115,8 +115,8 @@ impl CellListYardstick {
             y: p.y.clone(),
             vx: p.vx.clone(),
             vy: p.vy.clone(),
-            radius: p.radius.clone(),
-            mass: p.mass.clone(),
+            radius: p.radius.iter().copied().collect(),
+            mass: p.mass.iter().copied().collect(),
             id: p.id.clone(),
         };
         CellListYardstick {

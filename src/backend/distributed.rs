@@ -23,7 +23,6 @@ use crate::backend::{
 };
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
-use crate::sim::collision::{CommonProperties, Properties};
 use crate::sim::grid::{Contact, Entry, StripGrid, StripLayout, receive_band, refresh_band};
 use crate::sim::neighbours::{PairList, Skin, larger};
 use crate::sim::observe::observe;
@@ -178,8 +177,6 @@ struct RankState {
     ghosts_from: Option<usize>,
     /// The rank's own disks; during a step, ghosts follow them.
     particles: Particles,
-    /// The radius and mass of every disk of the scene, when all have the same.
-    common: Option<Properties>,
     /// How many of `particles` are the rank's own (the rest are this step's ghosts).
     n_own: usize,
     /// Strips tall enough for the neighbour list's skin.
@@ -236,7 +233,6 @@ impl RankState {
         };
         let other = |strip: usize| Some(owner[strip]).filter(|&rank| rank != me);
         RankState {
-            common: scene.particles.common_properties(),
             domain: scene.domain,
             physics: scene.physics,
             layout,
@@ -453,7 +449,7 @@ impl RankState {
 
     fn resolve_own_chains(&mut self, dt: f64) {
         resolve_contacts(
-            &mut CommonProperties::over(&mut self.particles, self.common),
+            &mut self.particles,
             &self.domain,
             &self.physics,
             dt,

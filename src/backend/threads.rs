@@ -22,7 +22,7 @@ use crate::backend::{
 use crate::draw::offscreen::{Offscreen, draw_step};
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
-use crate::sim::collision::{CommonProperties, DiskState, Properties};
+use crate::sim::collision::DiskState;
 use crate::sim::grid::{
     Contact, Entry, StripGrid, find_contacts_all_pairs_from, number_slots, receive_band,
     refresh_band,
@@ -33,7 +33,9 @@ use crate::sim::prefetch::prefetch;
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::{ContactSchedule, DiskSet};
 use crate::sim::step::{FIRST_BUILDS_SINCE_REORDER, REORDER_INTERVAL, advance_disks};
-use crate::sim::{Broadphase, DiskSlices, Domain, Particles, Physics, StepCounters, StepParams};
+use crate::sim::{
+    Broadphase, DiskSlices, Domain, Particles, PerDisk, Physics, StepCounters, StepParams,
+};
 
 /// Disks per parallel chunk of the per-disk stage: large enough to amortise scheduling.
 const MIN_CHUNK: usize = 4096;
@@ -107,8 +109,6 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
 /// pool that should execute it (`ThreadPool::install`).
 #[derive(Debug)]
 pub struct ThreadedStepper {
-    /// The radius and mass of every disk, when all have the same.
-    common: Option<Properties>,
     domain: Domain,
     physics: Physics,
     params: StepParams,
@@ -148,7 +148,6 @@ impl ThreadedStepper {
     ) -> Self {
         let skin = Skin::for_scene(&domain, particles, params.dt);
         ThreadedStepper {
-            common: particles.common_properties(),
             domain,
             physics,
             params,
@@ -198,7 +197,7 @@ impl ThreadedStepper {
             .zip(y.par_chunks_mut(chunk))
             .zip(vx.par_chunks_mut(chunk))
             .zip(vy.par_chunks_mut(chunk))
-            .zip(radius.par_chunks(chunk))
+            .zip(radius.chunks(chunk).collect::<Vec<_>>())
             .zip(displacements)
             .map(|(((((x, y), vx), vy), radius), displacements)| {
                 advance_disks(
@@ -430,12 +429,11 @@ impl ThreadedStepper {
 
     fn resolve_contacts(&mut self, particles: &mut Particles) {
         let (domain, physics, dt) = (&self.domain, &self.physics, self.params.dt);
-        let common = self.common;
         let n_lists = self.contacts.len();
         if n_lists == 1 {
             // One list and the crossing chains (of escapees) share no disk: either order.
             resolve_contacts(
-                &mut CommonProperties::over(particles, common),
+                particles,
                 domain,
                 physics,
                 dt,
@@ -457,7 +455,7 @@ impl ThreadedStepper {
                     let mut disks = unsafe { shared.claim() };
                     let mut counters = StepCounters::default();
                     resolve_contacts(
-                        &mut CommonProperties::over(&mut disks, common),
+                        &mut disks,
                         domain,
                         physics,
                         dt,
@@ -474,7 +472,7 @@ impl ThreadedStepper {
             self.counters.merge(&band_counters);
         }
         resolve_contacts(
-            &mut CommonProperties::over(particles, common),
+            particles,
             domain,
             physics,
             dt,
@@ -504,8 +502,8 @@ fn split_into_bands<'a>(
 /// contacts at once. Radii and masses are only read.
 #[derive(Clone, Copy)]
 struct SharedDisks<'a> {
-    radius: &'a [f64],
-    mass: &'a [f64],
+    radius: &'a PerDisk,
+    mass: &'a PerDisk,
     x: *mut f64,
     y: *mut f64,
     vx: *mut f64,
@@ -598,7 +596,7 @@ impl DiskState for ChainDisks<'_> {
     }
     #[inline(always)]
     fn prefetch_properties(&self, idx: usize) {
-        prefetch(self.0.radius.as_ptr().wrapping_add(idx));
-        prefetch(self.0.mass.as_ptr().wrapping_add(idx));
+        self.0.radius.prefetch(idx);
+        self.0.mass.prefetch(idx);
     }
 }

@@ -135,69 +135,10 @@ pub trait DiskState {
     /// contacts ahead hides the misses.
     #[inline(always)]
     fn prefetch_motion(&self, _idx: usize) {}
-    /// [`DiskState::prefetch_motion`] for the radius and mass.
+    /// [`DiskState::prefetch_motion`] for the radius and mass (held once for equal
+    /// disks: nothing to fetch).
     #[inline(always)]
     fn prefetch_properties(&self, _idx: usize) {}
-}
-
-/// The radius and mass of a disk.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Properties {
-    pub radius: f64,
-    pub mass: f64,
-}
-
-/// Disks whose radius and mass, when every disk has the same (`common`), are read from
-/// it instead of their arrays: resolution then reads four arrays per disk instead of
-/// six, which is what it waits for in a large scene. The same values, the same bits.
-pub struct CommonProperties<'a, S> {
-    disks: &'a mut S,
-    common: Option<Properties>,
-}
-
-impl<'a, S: DiskState> CommonProperties<'a, S> {
-    pub fn over(disks: &'a mut S, common: Option<Properties>) -> Self {
-        CommonProperties { disks, common }
-    }
-}
-
-impl<S: DiskState> DiskState for CommonProperties<'_, S> {
-    #[inline(always)]
-    fn position(&self, idx: usize) -> [f64; 2] {
-        self.disks.position(idx)
-    }
-    #[inline(always)]
-    fn velocity(&self, idx: usize) -> [f64; 2] {
-        self.disks.velocity(idx)
-    }
-    #[inline(always)]
-    fn radius(&self, idx: usize) -> f64 {
-        self.common
-            .map_or_else(|| self.disks.radius(idx), |common| common.radius)
-    }
-    #[inline(always)]
-    fn mass(&self, idx: usize) -> f64 {
-        self.common
-            .map_or_else(|| self.disks.mass(idx), |common| common.mass)
-    }
-    #[inline(always)]
-    fn set_position(&mut self, idx: usize, position: [f64; 2]) {
-        self.disks.set_position(idx, position);
-    }
-    #[inline(always)]
-    fn set_velocity(&mut self, idx: usize, velocity: [f64; 2]) {
-        self.disks.set_velocity(idx, velocity);
-    }
-    #[inline(always)]
-    fn prefetch_motion(&self, idx: usize) {
-        self.disks.prefetch_motion(idx);
-    }
-    #[inline(always)]
-    fn prefetch_properties(&self, idx: usize) {
-        if self.common.is_none() {
-            self.disks.prefetch_properties(idx);
-        }
-    }
 }
 
 impl DiskState for Particles {
@@ -235,9 +176,8 @@ impl DiskState for Particles {
     }
     #[inline(always)]
     fn prefetch_properties(&self, idx: usize) {
-        for values in [&self.radius, &self.mass] {
-            prefetch(values.as_ptr().wrapping_add(idx));
-        }
+        self.radius.prefetch(idx);
+        self.mass.prefetch(idx);
     }
 }
 

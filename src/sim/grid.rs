@@ -566,7 +566,7 @@ impl StripGrid {
         };
         // With a skin of 0, `r_a + r_b + skin` is the contact distance itself: adding 0.0
         // to a positive number is exact. With equal radii it is one number.
-        let (x, y, radius) = (&particles.x[..], &particles.y[..], &particles.radius[..]);
+        let (x, y, radius) = (&particles.x[..], &particles.y[..], &particles.radius);
         let equal_radius = self.layout.equal_radius.unwrap_or(0.0);
         let equal_limit = equal_radius + equal_radius + skin;
         let exact = |a: &Entry, b: &Entry| {

@@ -383,8 +383,11 @@ impl PairList {
         domain: &Domain,
         contacts: &mut Vec<Contact>,
     ) {
-        let (x, y, radius) = (&particles.x[..], &particles.y[..], &particles.radius[..]);
-        let equal_contact = radius.first().map_or(0.0, |r| r + r);
+        let (x, y) = (&particles.x[..], &particles.y[..]);
+        let equal_contact = particles.radius.iter().next().map_or(0.0, |r| r + r);
+        // Unequal radii are held one per disk.
+        let radius = particles.radius.as_slice().unwrap_or_default();
+        assert!(EQUAL_RADII || radius.len() == x.len(), "a radius per disk");
         for &[a, b] in &self.pairs {
             let (a, b) = (a as usize, b as usize);
             // SAFETY: the list was built for disks of this count (asserted by the

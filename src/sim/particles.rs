@@ -6,9 +6,12 @@
 //! stages may reorder the arrays together, and anything that must not
 //! depend on storage order (pair order, hashes, sums) goes by `id`.
 
-use super::collision::Properties;
+use std::ops::{Index, Range};
 
-/// Positions, velocities and properties of every disk, one `f64` array per quantity.
+use super::prefetch::prefetch;
+
+/// Positions, velocities and properties of every disk, one `f64` array per quantity;
+/// a property that every disk shares is held once ([`PerDisk`]).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Particles {
     /// Stable identity of each disk, `0..len`, independent of storage order.
@@ -17,8 +20,237 @@ pub struct Particles {
     pub y: Vec<f64>,
     pub vx: Vec<f64>,
     pub vy: Vec<f64>,
-    pub radius: Vec<f64>,
-    pub mass: Vec<f64>,
+    pub radius: PerDisk,
+    pub mass: PerDisk,
+}
+
+/// A property of every disk (radius, mass), by storage index: one value when every
+/// disk has the same, which costs no memory per disk (a scene of equal disks needs no
+/// more), else one value per disk. Reads give the same values either way.
+#[derive(Clone, Debug)]
+pub enum PerDisk {
+    /// `len` disks, each with `value`.
+    Shared { value: f64, len: usize },
+    /// One value per disk, in storage order.
+    Each(Vec<f64>),
+}
+
+impl Default for PerDisk {
+    fn default() -> Self {
+        PerDisk::Shared { value: 0.0, len: 0 }
+    }
+}
+
+impl PerDisk {
+    /// The values of `values.len()` disks, held once when all are the same (bit for bit).
+    pub fn from_values(values: Vec<f64>) -> PerDisk {
+        match values.first() {
+            Some(&first) if values.iter().all(|v| v.to_bits() == first.to_bits()) => {
+                PerDisk::Shared {
+                    value: first,
+                    len: values.len(),
+                }
+            }
+            _ => PerDisk::Each(values),
+        }
+    }
+
+    /// Each disk's value passed through `f`.
+    pub fn map(&self, f: impl Fn(f64) -> f64) -> PerDisk {
+        match self {
+            PerDisk::Shared { value, len } => PerDisk::Shared {
+                value: f(*value),
+                len: *len,
+            },
+            PerDisk::Each(values) => PerDisk::from_values(values.iter().map(|&v| f(v)).collect()),
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        match self {
+            PerDisk::Shared { len, .. } => *len,
+            PerDisk::Each(values) => values.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The value every disk has, when held once.
+    pub fn shared(&self) -> Option<f64> {
+        match self {
+            PerDisk::Shared { value, len } if *len > 0 => Some(*value),
+            _ => None,
+        }
+    }
+
+    /// The values one per disk, unless held once.
+    pub fn as_slice(&self) -> Option<&[f64]> {
+        match self {
+            PerDisk::Shared { .. } => None,
+            PerDisk::Each(values) => Some(values),
+        }
+    }
+
+    /// The values of the disks stored in `range`.
+    pub fn slice(&self, range: Range<usize>) -> PerDiskSlice<'_> {
+        match self {
+            PerDisk::Shared { value, len } => {
+                assert!(range.start <= range.end && range.end <= *len, "in bounds");
+                PerDiskSlice::Shared {
+                    value: *value,
+                    len: range.len(),
+                }
+            }
+            PerDisk::Each(values) => PerDiskSlice::Each(&values[range]),
+        }
+    }
+
+    pub fn iter(&self) -> PerDiskIter<'_> {
+        match self {
+            PerDisk::Shared { value, len } => PerDiskIter::Shared(std::iter::repeat_n(value, *len)),
+            PerDisk::Each(values) => PerDiskIter::Each(values.iter()),
+        }
+    }
+
+    /// Appends a disk's value; the first that differs from a shared value makes the
+    /// values one per disk.
+    pub fn push(&mut self, new: f64) {
+        match self {
+            PerDisk::Shared { len: 0, .. } => {
+                *self = PerDisk::Shared { value: new, len: 1 };
+            }
+            PerDisk::Shared { value, len } if value.to_bits() == new.to_bits() => *len += 1,
+            PerDisk::Shared { value, len } => {
+                let mut values = vec![*value; *len];
+                values.push(new);
+                *self = PerDisk::Each(values);
+            }
+            PerDisk::Each(values) => values.push(new),
+        }
+    }
+
+    /// Removes the disk stored at `idx`, moving the last disk into its slot.
+    pub fn swap_remove(&mut self, idx: usize) {
+        match self {
+            PerDisk::Shared { len, .. } => {
+                assert!(idx < *len, "in bounds");
+                *len -= 1;
+            }
+            PerDisk::Each(values) => {
+                values.swap_remove(idx);
+            }
+        }
+    }
+
+    /// Keeps the first `new_len` disks.
+    pub fn truncate(&mut self, new_len: usize) {
+        match self {
+            PerDisk::Shared { len, .. } => *len = (*len).min(new_len),
+            PerDisk::Each(values) => values.truncate(new_len),
+        }
+    }
+
+    /// Replaces one-per-disk values with what `remake` makes of them (a shared value
+    /// stays as it is: `remake` reorders).
+    fn remake(&mut self, remake: impl FnOnce(&[f64]) -> Vec<f64>) {
+        if let PerDisk::Each(values) = self {
+            *values = remake(values);
+        }
+    }
+
+    /// Asks the memory system for the value of the disk stored at `idx` (nothing to ask
+    /// for a shared value).
+    #[inline(always)]
+    pub fn prefetch(&self, idx: usize) {
+        if let PerDisk::Each(values) = self {
+            prefetch(values.as_ptr().wrapping_add(idx));
+        }
+    }
+}
+
+impl Index<usize> for PerDisk {
+    type Output = f64;
+
+    #[inline(always)]
+    fn index(&self, idx: usize) -> &f64 {
+        match self {
+            PerDisk::Shared { value, len } => {
+                assert!(idx < *len, "index {idx} out of bounds for {len} disks");
+                value
+            }
+            PerDisk::Each(values) => &values[idx],
+        }
+    }
+}
+
+/// Equal when the values are, however held.
+impl PartialEq for PerDisk {
+    fn eq(&self, other: &Self) -> bool {
+        self.len() == other.len() && self.iter().eq(other.iter())
+    }
+}
+
+impl<'a> IntoIterator for &'a PerDisk {
+    type Item = &'a f64;
+    type IntoIter = PerDiskIter<'a>;
+
+    fn into_iter(self) -> PerDiskIter<'a> {
+        self.iter()
+    }
+}
+
+/// The values of [`PerDisk::iter`].
+pub enum PerDiskIter<'a> {
+    Shared(std::iter::RepeatN<&'a f64>),
+    Each(std::slice::Iter<'a, f64>),
+}
+
+impl<'a> Iterator for PerDiskIter<'a> {
+    type Item = &'a f64;
+
+    fn next(&mut self) -> Option<&'a f64> {
+        match self {
+            PerDiskIter::Shared(values) => values.next(),
+            PerDiskIter::Each(values) => values.next(),
+        }
+    }
+}
+
+/// The values of a run of disks ([`PerDisk::slice`]).
+#[derive(Clone, Copy, Debug)]
+pub enum PerDiskSlice<'a> {
+    Shared { value: f64, len: usize },
+    Each(&'a [f64]),
+}
+
+impl<'a> PerDiskSlice<'a> {
+    pub fn len(&self) -> usize {
+        match self {
+            PerDiskSlice::Shared { len, .. } => *len,
+            PerDiskSlice::Each(values) => values.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Consecutive runs of `chunk` disks (the last may be shorter).
+    pub fn chunks(self, chunk: usize) -> impl Iterator<Item = PerDiskSlice<'a>> {
+        let len = self.len();
+        (0..len).step_by(chunk.max(1)).map(move |start| {
+            let end = (start + chunk).min(len);
+            match self {
+                PerDiskSlice::Shared { value, .. } => PerDiskSlice::Shared {
+                    value,
+                    len: end - start,
+                },
+                PerDiskSlice::Each(values) => PerDiskSlice::Each(&values[start..end]),
+            }
+        })
+    }
 }
 
 /// Values per disk in a packed buffer ([`Particles::pack`]).
@@ -32,7 +264,7 @@ pub struct DiskSlices<'a> {
     pub y: &'a mut [f64],
     pub vx: &'a mut [f64],
     pub vy: &'a mut [f64],
-    pub radius: &'a [f64],
+    pub radius: PerDiskSlice<'a>,
 }
 
 /// One disk, used to build and inspect [`Particles`] (not on hot paths).
@@ -63,8 +295,8 @@ impl Particles {
             y: Vec::with_capacity(n_particles),
             vx: Vec::with_capacity(n_particles),
             vy: Vec::with_capacity(n_particles),
-            radius: Vec::with_capacity(n_particles),
-            mass: Vec::with_capacity(n_particles),
+            radius: PerDisk::default(),
+            mass: PerDisk::default(),
         }
     }
 
@@ -86,7 +318,7 @@ impl Particles {
             y: &mut self.y,
             vx: &mut self.vx,
             vy: &mut self.vy,
-            radius: &self.radius,
+            radius: self.radius.slice(0..self.id.len()),
         }
     }
 
@@ -137,54 +369,51 @@ impl Particles {
         );
     }
 
-    /// Replaces every array with what `floats` (for the f64 arrays) or `ids` makes of it.
+    /// Replaces every array with what `floats` (for the f64 arrays, and the properties
+    /// held one per disk) or `ids` makes of it: a reordering.
     pub fn replace_arrays(
         &mut self,
         mut floats: impl FnMut(&[f64]) -> Vec<f64>,
         ids: impl FnOnce(&[u32]) -> Vec<u32>,
     ) {
         self.id = ids(&self.id);
-        for values in self.float_arrays_mut() {
+        for values in self.motion_arrays_mut() {
             *values = floats(values);
+        }
+        for values in self.properties_mut() {
+            values.remake(&mut floats);
         }
     }
 
-    /// The f64 arrays in packing order: x, y, vx, vy, radius, mass. With `id`, the one
-    /// place that lists the arrays, for operations that treat them all alike.
-    fn float_arrays_mut(&mut self) -> [&mut Vec<f64>; 6] {
-        [
-            &mut self.x,
-            &mut self.y,
-            &mut self.vx,
-            &mut self.vy,
-            &mut self.radius,
-            &mut self.mass,
-        ]
+    /// The positions and velocities in packing order: x, y, vx, vy. With `id` and
+    /// [`Particles::properties_mut`], the one place that lists the arrays, for
+    /// operations that treat them all alike.
+    fn motion_arrays_mut(&mut self) -> [&mut Vec<f64>; 4] {
+        [&mut self.x, &mut self.y, &mut self.vx, &mut self.vy]
     }
 
-    fn float_arrays(&self) -> [&Vec<f64>; 6] {
-        [
-            &self.x,
-            &self.y,
-            &self.vx,
-            &self.vy,
-            &self.radius,
-            &self.mass,
-        ]
+    /// The properties in packing order: radius, mass.
+    fn properties_mut(&mut self) -> [&mut PerDisk; 2] {
+        [&mut self.radius, &mut self.mass]
     }
 
     /// Appends the disk stored at `idx` to `out` as [`PACKED_LEN`] values: id, x, y, vx,
     /// vy, radius, mass (ids below 2^32 are exact in f64).
     pub fn pack(&self, idx: usize, out: &mut Vec<f64>) {
         out.push(f64::from(self.id[idx]));
-        out.extend(self.float_arrays().map(|values| values[idx]));
+        out.extend([&self.x, &self.y, &self.vx, &self.vy].map(|values| values[idx]));
+        out.extend([&self.radius, &self.mass].map(|values| values[idx]));
     }
 
     /// Appends the disks packed in `packed` (records of [`Particles::pack`]), keeping ids.
     pub fn unpack_append(&mut self, packed: &[f64]) {
         for record in packed.chunks_exact(PACKED_LEN) {
             self.id.push(record[0] as u32);
-            for (values, &value) in self.float_arrays_mut().into_iter().zip(&record[1..]) {
+            let (motion, properties) = record[1..].split_at(4);
+            for (values, &value) in self.motion_arrays_mut().into_iter().zip(motion) {
+                values.push(value);
+            }
+            for (values, &value) in self.properties_mut().into_iter().zip(properties) {
                 values.push(value);
             }
         }
@@ -193,7 +422,10 @@ impl Particles {
     /// Removes the disk stored at `idx`, moving the last disk into its slot.
     pub fn swap_remove(&mut self, idx: usize) {
         self.id.swap_remove(idx);
-        for values in self.float_arrays_mut() {
+        for values in self.motion_arrays_mut() {
+            values.swap_remove(idx);
+        }
+        for values in self.properties_mut() {
             values.swap_remove(idx);
         }
     }
@@ -201,7 +433,10 @@ impl Particles {
     /// Keeps the first `len` disks in storage order.
     pub fn truncate(&mut self, len: usize) {
         self.id.truncate(len);
-        for values in self.float_arrays_mut() {
+        for values in self.motion_arrays_mut() {
+            values.truncate(len);
+        }
+        for values in self.properties_mut() {
             values.truncate(len);
         }
     }
@@ -217,17 +452,6 @@ impl Particles {
     /// Largest radius, 0 for an empty set.
     pub fn max_radius(&self) -> f64 {
         self.radius.iter().copied().fold(0.0, f64::max)
-    }
-
-    /// The radius and mass of every disk, when all have the same (and there are some).
-    pub fn common_properties(&self) -> Option<Properties> {
-        let first = Properties {
-            radius: *self.radius.first()?,
-            mass: *self.mass.first()?,
-        };
-        let common = self.radius.iter().all(|&radius| radius == first.radius)
-            && self.mass.iter().all(|&mass| mass == first.mass);
-        common.then_some(first)
     }
 
     /// Smallest radius, infinite for an empty set.
@@ -254,5 +478,71 @@ impl Particles {
             .zip(&self.vy)
             .map(|(vx, vy)| vx.hypot(*vy))
             .fold(0.0, f64::max)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn disk(x: f64, radius: f64) -> Disk {
+        Disk {
+            x,
+            y: 1.0,
+            vx: 0.5,
+            vy: -0.5,
+            radius,
+            mass: 2.0,
+        }
+    }
+
+    /// Equal disks hold their radius and mass once, through every operation that keeps
+    /// them equal; the first unequal disk makes them one per disk, with the same values.
+    #[test]
+    fn a_shared_property_stays_shared_until_a_disk_differs() {
+        let mut particles = Particles::from_disks(&[disk(1.0, 0.5), disk(2.0, 0.5)]);
+        assert_eq!(particles.radius.shared(), Some(0.5));
+        assert_eq!(particles.mass.shared(), Some(2.0));
+        let mut packed = Vec::new();
+        particles.pack(1, &mut packed);
+        particles.unpack_append(&packed);
+        particles.reorder(&[2, 0, 1]);
+        particles.swap_remove(0);
+        assert_eq!(particles.radius.shared(), Some(0.5));
+        assert_eq!(particles.len(), 2);
+        assert_eq!(particles.radius.len(), 2);
+
+        particles.push(disk(3.0, 0.75));
+        assert_eq!(particles.radius.shared(), None);
+        assert_eq!(particles.radius.as_slice(), Some(&[0.5, 0.5, 0.75][..]));
+        assert_eq!(
+            particles.mass.shared(),
+            Some(2.0),
+            "the masses are still equal"
+        );
+        particles.reorder(&[2, 0, 1]);
+        assert_eq!(particles.radius.as_slice(), Some(&[0.75, 0.5, 0.5][..]));
+        particles.truncate(1);
+        assert_eq!(particles.disk(0), disk(3.0, 0.75));
+    }
+
+    /// How a property is held does not change what it is: values, equality, slices.
+    #[test]
+    fn shared_and_per_disk_values_read_the_same() {
+        let shared = PerDisk::from_values(vec![1.5; 5]);
+        let each = PerDisk::Each(vec![1.5; 5]);
+        assert_eq!(shared.shared(), Some(1.5));
+        assert_eq!(shared, each);
+        assert_ne!(shared, PerDisk::from_values(vec![1.5; 4]));
+        assert_ne!(shared, PerDisk::from_values(vec![1.5, 1.5, 1.5, 1.5, 2.0]));
+        for idx in 0..5 {
+            assert_eq!(shared[idx].to_bits(), each[idx].to_bits());
+        }
+        let lens = |values: &PerDisk| -> Vec<usize> {
+            values.slice(1..5).chunks(3).map(|c| c.len()).collect()
+        };
+        assert_eq!(lens(&shared), [3, 1]);
+        assert_eq!(lens(&each), [3, 1]);
+        assert_eq!(shared.map(|r| r * 2.0).shared(), Some(3.0));
     }
 }

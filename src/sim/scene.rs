@@ -10,7 +10,7 @@ use rand_distr::StandardNormal;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::{Deserialize, Serialize};
 
-use super::particles::Particles;
+use super::particles::{Particles, PerDisk};
 use super::prefetch::prefetch;
 
 /// Random sequential addition of equal disks jams near this area fraction in 2D.
@@ -360,9 +360,18 @@ impl GasSpec {
             &mut rng,
         );
         let (vx, vy) = moved_to_storage_order(&order, velocities);
-        let radius: Vec<f64> = order.iter().map(|&idx| radii.of(idx as usize)).collect();
+        // Equal disks hold their radius and mass once.
+        let radius = match radii {
+            Radii::Fixed(r) => PerDisk::Shared {
+                value: r,
+                len: n_particles,
+            },
+            Radii::Drawn(_) => {
+                PerDisk::from_values(order.iter().map(|&idx| radii.of(idx as usize)).collect())
+            }
+        };
         drop((order, radii));
-        let mass = radius.iter().map(|&r| mass_of(r)).collect();
+        let mass = radius.map(mass_of);
         Ok(Scene {
             domain,
             physics: self.physics,
@@ -932,10 +941,14 @@ mod tests {
             hasher.update(&id.to_le_bytes());
         }
         let p = particles;
-        for values in [&p.x, &p.y, &p.vx, &p.vy, &p.radius, &p.mass] {
-            for value in values {
-                hasher.update(&value.to_le_bytes());
-            }
+        let motion = [&p.x, &p.y, &p.vx, &p.vy].map(|values| values.iter());
+        let properties = [&p.radius, &p.mass].map(|values| values.iter());
+        for value in motion
+            .into_iter()
+            .flatten()
+            .chain(properties.into_iter().flatten())
+        {
+            hasher.update(&value.to_le_bytes());
         }
         for value in [scene.domain.width, scene.domain.height] {
             hasher.update(&value.to_le_bytes());

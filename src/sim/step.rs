@@ -8,11 +8,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::collision::{CommonProperties, Properties};
 use super::counters::StepCounters;
 use super::grid::{Contact, StripGrid, find_contacts_all_pairs};
 use super::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin, mark_escapees};
-use super::particles::{DiskSlices, Particles};
+use super::particles::{DiskSlices, Particles, PerDiskSlice};
 use super::resolve::resolve_contacts;
 use super::scene::{Boundary, Domain, Physics, Scene, wrap_periodic};
 use super::schedule::ResolutionOrder;
@@ -67,8 +66,6 @@ pub struct Stepper {
     builds_since_reorder: u32,
     contacts: Vec<Contact>,
     order: ResolutionOrder,
-    /// The radius and mass of every disk, when all have the same.
-    common: Option<Properties>,
     counters: StepCounters,
 }
 
@@ -91,7 +88,6 @@ impl Stepper {
             builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
             contacts: Vec::new(),
             order: ResolutionOrder::default(),
-            common: particles.common_properties(),
             counters: StepCounters::default(),
         }
     }
@@ -213,7 +209,7 @@ impl Stepper {
         collided: impl FnMut(u64),
     ) {
         resolve_contacts(
-            &mut CommonProperties::over(particles, self.common),
+            particles,
             &self.domain,
             &self.physics,
             self.params.dt,
@@ -305,7 +301,7 @@ fn advance_block<const PERIODIC: bool>(
     y: &mut [f64],
     vx: &mut [f64],
     vy: &mut [f64],
-    radius: &[f64],
+    radius: PerDiskSlice<'_>,
     domain: &Domain,
     physics: &Physics,
     dt: f64,
@@ -330,7 +326,15 @@ fn advance_block<const PERIODIC: bool>(
             *y = wrap_periodic(*y, domain.height);
         }
     } else {
-        reflect_at_walls(x, y, vx, vy, radius, domain, physics, walls);
+        match radius {
+            PerDiskSlice::Shared { value, .. } => {
+                reflect_at_walls(x, y, vx, vy, |_| value, domain, physics, walls);
+            }
+            PerDiskSlice::Each(radius) => {
+                let radius = &radius[..x.len()];
+                reflect_at_walls(x, y, vx, vy, |i| radius[i], domain, physics, walls);
+            }
+        }
     }
     if let Some((x0, y0, escapees, escape_sq)) = record {
         *escapees = mark_escapees::<PERIODIC>(x, y, x0, y0, domain, escape_sq);
@@ -365,22 +369,21 @@ fn reflect_at_walls(
     y: &[f64],
     vx: &mut [f64],
     vy: &mut [f64],
-    radius: &[f64],
+    radius: impl Fn(usize) -> f64,
     domain: &Domain,
     physics: &Physics,
     walls: &mut StepCounters,
 ) {
     let (width, height) = (domain.width, domain.height);
+    let n = x.len();
+    let (y, vx, vy) = (&y[..n], &mut vx[..n], &mut vy[..n]);
     // How many disks of the block are near a wall: an integer sum, which vectorises (a
     // NaN disk is near no wall).
-    let near = x
-        .iter()
-        .zip(y)
-        .zip(radius)
-        .fold(0_u32, |near, ((&x, &y), &r)| {
-            let outside = (x - r < 0.0) | (x + r > width) | (y - r < 0.0) | (y + r > height);
-            near + u32::from(outside)
-        });
+    let near = (0..n).fold(0_u32, |near, i| {
+        let (x, y, r) = (x[i], y[i], radius(i));
+        let outside = (x - r < 0.0) | (x + r > width) | (y - r < 0.0) | (y + r > height);
+        near + u32::from(outside)
+    });
     if near == 0 {
         return;
     }
@@ -395,9 +398,9 @@ fn reflect_at_walls(
             .max((r - p).max(p + r - length) / r);
         walls.wall_collisions += u64::from(outward);
     };
-    for i in 0..radius.len() {
-        reflect(x[i], &mut vx[i], radius[i], width);
-        reflect(y[i], &mut vy[i], radius[i], height);
+    for i in 0..n {
+        reflect(x[i], &mut vx[i], radius(i), width);
+        reflect(y[i], &mut vy[i], radius(i), height);
     }
 }
 
