@@ -23,7 +23,9 @@ use crate::backend::{
 };
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
-use crate::sim::grid::{Contact, Entry, StripGrid, StripLayout, receive_band, refresh_band};
+use crate::sim::grid::{
+    Contact, Mover, StripGrid, StripLayout, receive_band, refresh_band, sort_movers,
+};
 use crate::sim::neighbours::{PairList, Skin, larger};
 use crate::sim::observe::observe;
 use crate::sim::particles::PACKED_LEN;
@@ -189,7 +191,7 @@ struct RankState {
     /// sees them as its ghosts.
     exported: DiskSet,
     builds_since_reorder: u32,
-    movers: Vec<Entry>,
+    movers: Vec<Mover>,
     contacts: Vec<Contact>,
     shared: Vec<Contact>,
     schedule: ContactSchedule,
@@ -347,7 +349,7 @@ impl RankState {
             .movers
             .iter()
             .filter(|mover| !staying.contains(&mover.strip()))
-            .map(Entry::idx)
+            .map(Mover::idx)
             .collect();
         // Highest slots first, so the last disk moved into a freed slot is never one
         // that is itself leaving.
@@ -363,14 +365,16 @@ impl RankState {
         for packed in immigrants {
             self.particles.unpack_append(packed);
         }
-        let mut arrived: Vec<Entry> = (first_new..self.particles.len())
-            .map(|idx| self.grid.entry(&self.particles, idx))
+        let mut arrived: Vec<Mover> = (first_new..self.particles.len())
+            .map(|idx| self.grid.mover(&self.particles, idx))
             .collect();
-        arrived.sort_unstable_by(|a, b| a.strip().cmp(&b.strip()).then(a.x().total_cmp(&b.x())));
+        sort_movers(&mut arrived);
         receive_band(self.grid.owned_strips_mut(), self.slab.start, &[&arrived]);
 
         self.builds_since_reorder += 1;
         if self.builds_since_reorder >= REORDER_INTERVAL {
+            // The list is rebuilt next: freed first, as the serial stepper does.
+            self.list = PairList::default();
             self.particles.reorder(&self.grid.sorted_indices());
             self.grid.storage_now_sorted();
             self.builds_since_reorder = 0;

@@ -24,7 +24,7 @@ use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
 use crate::sim::collision::DiskState;
 use crate::sim::grid::{
-    Contact, Entry, StripGrid, find_contacts_all_pairs_from, number_slots, receive_band,
+    Contact, Entry, Mover, StripGrid, find_contacts_all_pairs_from, number_slots, receive_band,
     refresh_band,
 };
 use crate::sim::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin};
@@ -125,7 +125,7 @@ pub struct ThreadedStepper {
     touched: Vec<bool>,
     builds_since_reorder: u32,
     /// Per band: disks that left its strips in the last refresh.
-    movers: Vec<Vec<Entry>>,
+    movers: Vec<Vec<Mover>>,
     /// Per band: the pairs its strips found, then those of chains it resolves alone.
     contacts: Vec<Vec<Contact>>,
     /// Per band: the pairs of its chains that reach a band's first strip.
@@ -373,12 +373,14 @@ impl ThreadedStepper {
                 refresh_band(&layout, band, *first, now, &mut movers);
                 *band_movers = movers;
             });
-        let movers: Vec<&[Entry]> = self.movers.iter().map(Vec::as_slice).collect();
+        let movers: Vec<&[Mover]> = self.movers.iter().map(Vec::as_slice).collect();
         slices
             .par_iter_mut()
             .for_each(|(first, band)| receive_band(band, *first, &movers));
         self.builds_since_reorder += 1;
         if self.builds_since_reorder >= REORDER_INTERVAL {
+            // The lists are rebuilt next: freed first, as the serial stepper does.
+            self.lists.clear();
             let strips = self.grid.owned_strips_mut();
             let order: Vec<u32> = strips
                 .par_iter()

@@ -36,8 +36,8 @@ impl Contact {
     }
 }
 
-/// One disk in the sorted view: what the pair scan reads, 16 bytes, kept in x order
-/// inside its strip. The position is rounded to f32, which halves the memory of the
+/// One disk in the sorted view: what the pair scan reads, 12 bytes, kept in x order
+/// inside its strip (which strip is where it is kept). The position is rounded to f32, which halves the memory of the
 /// grid and of its scans; every test on it is widened by the rounding
 /// ([`rounding_slack`]), so it finds a superset of the pairs, and the pairs that count
 /// are decided by the disks' own f64 positions.
@@ -47,8 +47,6 @@ pub struct Entry {
     y: f32,
     /// Storage index of the disk.
     idx: u32,
-    /// Global index of the strip the disk is in.
-    strip: u32,
 }
 
 impl Entry {
@@ -61,10 +59,26 @@ impl Entry {
     pub fn x(&self) -> f32 {
         self.x
     }
+}
 
-    /// Global index of the strip the disk was in at the last refresh.
+const _: () = assert!(std::mem::size_of::<Entry>() == 12, "entries of 12 bytes");
+
+/// A disk on its way into a strip: its entry, and the global index of the strip.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Mover {
+    pub entry: Entry,
+    strip: u32,
+}
+
+impl Mover {
+    /// Global index of the strip the disk goes to.
     pub fn strip(&self) -> usize {
         self.strip as usize
+    }
+
+    /// Storage index of the disk.
+    pub fn idx(&self) -> u32 {
+        self.entry.idx
     }
 }
 
@@ -154,7 +168,7 @@ pub struct StripGrid {
     strips: Vec<Vec<Entry>>,
     /// All strips of a periodic box: the strip above the last one is the first.
     north_wraps: bool,
-    movers: Vec<Entry>,
+    movers: Vec<Mover>,
 }
 
 impl StripGrid {
@@ -248,8 +262,8 @@ impl StripGrid {
             strip.clear();
         }
         for idx in indices {
-            let entry = self.entry(particles, idx);
-            self.strips[entry.strip() - self.first].push(entry);
+            let mover = self.mover(particles, idx);
+            self.strips[mover.strip() - self.first].push(mover.entry);
         }
         // Disks stored in row order arrive as a few runs already sorted by x (the rows
         // that meet the strip): a merging sort finds the runs and merges them in a few
@@ -259,13 +273,15 @@ impl StripGrid {
         }
     }
 
-    /// The entry of the disk stored at `idx`, in the strip its height gives.
-    pub fn entry(&self, particles: &Particles, idx: usize) -> Entry {
+    /// The entry of the disk stored at `idx`, for the strip its height gives.
+    pub fn mover(&self, particles: &Particles, idx: usize) -> Mover {
         let y = particles.y[idx];
-        Entry {
-            x: particles.x[idx] as f32,
-            y: y as f32,
-            idx: idx as u32,
+        Mover {
+            entry: Entry {
+                x: particles.x[idx] as f32,
+                y: y as f32,
+                idx: idx as u32,
+            },
             strip: self.layout.strip_of(y) as u32,
         }
     }
@@ -273,14 +289,13 @@ impl StripGrid {
     /// Replaces the ghost strip with the disks stored at `indices`, given in x order
     /// (they are the next strip's disks, in the order their owner keeps them).
     pub fn set_ghosts(&mut self, particles: &Particles, indices: Range<usize>) {
-        let strip = self.ghost_strip().expect("a grid with a ghost strip") as u32;
+        assert!(self.ghost_strip().is_some(), "a grid with a ghost strip");
         let ghosts = self.strips.last_mut().expect("a ghost strip");
         ghosts.clear();
         ghosts.extend(indices.map(|idx| Entry {
             x: particles.x[idx] as f32,
             y: particles.y[idx] as f32,
             idx: idx as u32,
-            strip,
         }));
     }
 
@@ -753,7 +768,7 @@ pub fn refresh_band(
     band: &mut [Vec<Entry>],
     first: usize,
     particles: &Particles,
-    movers: &mut Vec<Entry>,
+    movers: &mut Vec<Mover>,
 ) {
     let (x, y) = (&particles.x[..], &particles.y[..]);
     for (offset, strip) in band.iter_mut().enumerate() {
@@ -765,24 +780,32 @@ pub fn refresh_band(
             entry.x = x[idx] as f32;
             entry.y = y[idx] as f32;
             // The strip goes by the f64 height, as everywhere.
-            entry.strip = layout.strip_of(y[idx]) as u32;
-            if entry.strip == here {
+            let strip_now = layout.strip_of(y[idx]) as u32;
+            if strip_now == here {
                 strip[kept] = entry;
                 kept += 1;
             } else {
-                movers.push(entry);
+                movers.push(Mover {
+                    entry,
+                    strip: strip_now,
+                });
             }
         }
         strip.truncate(kept);
         insertion_sort(strip);
     }
-    movers.sort_unstable_by(|a, b| a.strip.cmp(&b.strip).then(a.x.total_cmp(&b.x)));
+    sort_movers(movers);
+}
+
+/// Sorts movers by strip, then x: the order [`receive_band`] takes.
+pub fn sort_movers(movers: &mut [Mover]) {
+    movers.sort_unstable_by(|a, b| a.strip.cmp(&b.strip).then(a.entry.x.total_cmp(&b.entry.x)));
 }
 
 /// Second phase of a build, for one band of strips (`band[0]` has global index
 /// `first`): merges in the movers of every band (each list sorted by strip and x) that
 /// now belong to this band's strips.
-pub fn receive_band(band: &mut [Vec<Entry>], first: usize, movers: &[&[Entry]]) {
+pub fn receive_band(band: &mut [Vec<Entry>], first: usize, movers: &[&[Mover]]) {
     let end = first + band.len();
     for list in movers {
         let from = list.partition_point(|m| m.strip() < first);
@@ -802,11 +825,11 @@ pub fn number_slots(strip: &mut [Entry], first_slot: usize) {
 }
 
 /// Merges `incoming` (sorted by x) into `strip` (sorted by x), from the back.
-fn merge_sorted(strip: &mut Vec<Entry>, incoming: &[Entry]) {
+fn merge_sorted(strip: &mut Vec<Entry>, incoming: &[Mover]) {
     let mut read = strip.len();
     strip.resize(read + incoming.len(), Entry::default());
     let mut write = strip.len();
-    for new in incoming.iter().rev() {
+    for new in incoming.iter().rev().map(|mover| &mover.entry) {
         while read > 0 && new.x < strip[read - 1].x {
             read -= 1;
             write -= 1;

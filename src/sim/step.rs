@@ -183,7 +183,10 @@ impl Stepper {
         self.builds_since_reorder += 1;
         if self.builds_since_reorder >= REORDER_INTERVAL {
             // Storing disks in grid order keeps the next builds' reads sequential.
-            // Results do not change: pair order and sums go by id, not storage.
+            // Results do not change: pair order and sums go by id, not storage. The
+            // list, rebuilt below, is freed first: the re-storing's new arrays take its
+            // memory instead of adding to the peak.
+            self.neighbours = PairList::default();
             particles.reorder(&self.grid.sorted_indices());
             self.grid.storage_now_sorted();
             self.builds_since_reorder = 0;
