@@ -323,6 +323,9 @@ impl Skin {
     }
 }
 
+/// Listed pairs tested together by [`PairList::find_contacts`].
+const FILTER_GROUP: usize = 4;
+
 /// One list of candidate pairs (storage indices), in the order the grid found them.
 #[derive(Clone, Debug, Default)]
 pub struct PairList {
@@ -388,27 +391,44 @@ impl PairList {
         // Unequal radii are held one per disk.
         let radius = particles.radius.as_slice().unwrap_or_default();
         assert!(EQUAL_RADII || radius.len() == x.len(), "a radius per disk");
-        for &[a, b] in &self.pairs {
+        // SAFETY: the list was built for disks of this count (asserted by the caller),
+        // from storage indices below it; x, y and radius have that length.
+        let overlaps = |[a, b]: [u32; 2]| unsafe {
             let (a, b) = (a as usize, b as usize);
-            // SAFETY: the list was built for disks of this count (asserted by the
-            // caller), from storage indices below it; x, y and radius have that length.
-            let (xa, ya, xb, yb, contact) = unsafe {
-                let contact = if EQUAL_RADII {
-                    equal_contact
-                } else {
-                    radius.get_unchecked(a) + radius.get_unchecked(b)
-                };
-                (
-                    *x.get_unchecked(a),
-                    *y.get_unchecked(a),
-                    *x.get_unchecked(b),
-                    *y.get_unchecked(b),
-                    contact,
-                )
+            let contact = if EQUAL_RADII {
+                equal_contact
+            } else {
+                radius.get_unchecked(a) + radius.get_unchecked(b)
             };
+            let (xa, ya) = (*x.get_unchecked(a), *y.get_unchecked(a));
+            let (xb, yb) = (*x.get_unchecked(b), *y.get_unchecked(b));
             let (dx, dy) = domain.separation_in::<PERIODIC>(xa, ya, xb, yb);
-            if dx * dx + dy * dy < contact * contact {
-                contacts.push(Contact::new(particles, a, b));
+            dx * dx + dy * dy < contact * contact
+        };
+        // Few pairs overlap: a group of pairs is tested whole, and looked into only when
+        // one of them does (one well-predicted branch per group instead of per pair).
+        let mut groups = self.pairs.chunks_exact(FILTER_GROUP);
+        for group in &mut groups {
+            let hits: [bool; FILTER_GROUP] = std::array::from_fn(|k| overlaps(group[k]));
+            if hits.iter().any(|&hit| hit) {
+                // Every pair of the group written, the length moved on by the hits: no
+                // branch per pair here either.
+                contacts.reserve(FILTER_GROUP);
+                for (&[a, b], hit) in group.iter().zip(hits) {
+                    let len = contacts.len();
+                    // SAFETY: `reserve` left room for the whole group; the length grows
+                    // over a written contact only.
+                    unsafe {
+                        let contact = Contact::new(particles, a as usize, b as usize);
+                        contacts.as_mut_ptr().add(len).write(contact);
+                        contacts.set_len(len + usize::from(hit));
+                    }
+                }
+            }
+        }
+        for &[a, b] in groups.remainder() {
+            if overlaps([a, b]) {
+                contacts.push(Contact::new(particles, a as usize, b as usize));
             }
         }
     }
