@@ -635,13 +635,17 @@ impl StripGrid {
                             .iter()
                             .take_while(|b| b.x + width - a.x < reach)
                         {
-                            sink.offer(within(a, b), a, b);
+                            sink.make_room(1);
+                            // SAFETY: room was made just above.
+                            unsafe { sink.offer(within(a, b), a, b) };
                         }
                         for b in north_entries
                             .iter()
                             .take_while(|b| b.x + width < a.x + reach)
                         {
-                            sink.offer(within(a, b), a, b);
+                            sink.make_room(1);
+                            // SAFETY: room was made just above.
+                            unsafe { sink.offer(within(a, b), a, b) };
                         }
                     }
                     if a.x - reach < 0.0 {
@@ -650,7 +654,9 @@ impl StripGrid {
                             .rev()
                             .take_while(|b| b.x - width > a.x - reach)
                         {
-                            sink.offer(within(a, b), a, b);
+                            sink.make_room(1);
+                            // SAFETY: room was made just above.
+                            unsafe { sink.offer(within(a, b), a, b) };
                         }
                     }
                 }
@@ -668,7 +674,7 @@ const NORTH_WINDOW: usize = 4;
 /// `candidates` from the window's start on, in x order, while `inside` (the window ends
 /// where `inside` first fails). The first `K` are offered whatever their count, those
 /// outside failing the test rather than a loop exit; a loop continues only when the
-/// `K`-th is still inside.
+/// `K`-th is still inside. Room for the first `K` is made at once, not one by one.
 #[inline(always)]
 fn offer_window<const K: usize>(
     candidates: &[Entry],
@@ -679,15 +685,19 @@ fn offer_window<const K: usize>(
 ) {
     let rest = match candidates.split_first_chunk::<K>() {
         Some((window, rest)) => {
+            sink.make_room(K);
             for b in window {
-                sink.offer(inside(b) & within(a, b), a, b);
+                // SAFETY: room was made for these `K` just above.
+                unsafe { sink.offer(inside(b) & within(a, b), a, b) };
             }
             if inside(&window[K - 1]) { rest } else { &[] }
         }
         None => candidates,
     };
     for b in rest.iter().take_while(|b| inside(b)) {
-        sink.offer(within(a, b), a, b);
+        sink.make_room(1);
+        // SAFETY: room was made just above.
+        unsafe { sink.offer(within(a, b), a, b) };
     }
 }
 
@@ -697,7 +707,13 @@ trait Sink {
     /// Whether the pairs must be decided exactly (by the disks' f64 positions), or a
     /// superset will do (the f32 entries' widened test alone).
     const EXACT: bool;
-    fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry);
+    /// Makes room for `n` more offers.
+    fn make_room(&mut self, _n: usize) {}
+    /// Takes one candidate pair.
+    ///
+    /// # Safety
+    /// Room was made for this offer ([`Sink::make_room`]) and not used by another.
+    unsafe fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry);
 }
 
 /// How far a test on f32 entries must be widened to never reject a pair the f64
@@ -728,7 +744,7 @@ struct ContactSink<'a> {
 impl Sink for ContactSink<'_> {
     const EXACT: bool = true;
     #[inline(always)]
-    fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry) {
+    unsafe fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry) {
         if accepted {
             let contact = Contact::new(self.particles, a.idx as usize, b.idx as usize);
             self.contacts.push(contact);
@@ -746,13 +762,18 @@ struct PairSink<'a> {
 impl Sink for PairSink<'_> {
     const EXACT: bool = false;
     #[inline(always)]
-    fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry) {
-        if self.pairs.len() == self.pairs.capacity() {
-            self.pairs.reserve(1024);
+    fn make_room(&mut self, n: usize) {
+        if self.pairs.capacity() - self.pairs.len() < n {
+            self.pairs.reserve(n.max(1024));
         }
+    }
+
+    #[inline(always)]
+    unsafe fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry) {
         let len = self.pairs.len();
-        // SAFETY: the check above leaves room for one more element at `len`; the length
-        // grows over it only when it was written.
+        debug_assert!(len < self.pairs.capacity(), "room made for every offer");
+        // SAFETY: the caller made room for this element at `len`; the length grows over
+        // it only when it was written.
         unsafe {
             self.pairs.as_mut_ptr().add(len).write([a.idx, b.idx]);
             self.pairs.set_len(len + usize::from(accepted));
