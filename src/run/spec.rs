@@ -231,16 +231,17 @@ impl PreparedRun {
 // 126 B per disk serial and 140 B with rayon on 2 threads (2026-11-23); 114 B and 126 B
 // since the strip grid's entries shrank to 16 bytes (2026-11-24); 82 B and 94 B since
 // equal disks hold their radius and mass once, with 12-byte entries and f32 build
-// positions, and 99 B and 112 B for unequal disks (radius from 0.5 to 1.5), 2026-11-24,
-// 20:38 UTC. By its arrays' sizes, each further thread adds about 6 B (its band's
-// union-find and resolution-order scratch), so 8 threads stay below the 152 kept here. The event method's, from the
+// positions, and 99 B and 112 B for radii from 0.5 to 1.5 with equal masses (2026-11-24,
+// 20:38 UTC); masses by area add an array, 8 B. By its arrays' sizes, each further
+// thread adds about 6 B (its band's union-find and resolution-order scratch), so 8
+// threads stay below the 160 kept here. The event method's, from the
 // slope between N = 250 000 and 10⁶ (before the neighbour lists; its state did not
 // change): 352 B (serial). The intercept is about 21 MB. Re-measure when the state or
 // its scratch memory changes size.
 
 /// Peak resident bytes per disk of the step method, any backend (the largest measured,
 /// with room for 8 threads).
-pub const STEP_BYTES_PER_DISK: u64 = 152;
+pub const STEP_BYTES_PER_DISK: u64 = 160;
 /// Peak resident bytes per disk of the event method (its calendar of predicted events).
 pub const EVENT_BYTES_PER_DISK: u64 = 368;
 /// Peak resident bytes of a run before its disks: the program, its libraries, the pool.
