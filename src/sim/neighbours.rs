@@ -304,17 +304,21 @@ impl Skin {
 
     /// Records the disks' positions as those of a build.
     pub fn record(&mut self, particles: &Particles) {
-        let rounded = |values: &[f64], record: &mut Vec<f32>| {
-            record.clear();
-            record.extend(values.iter().map(|&value| value as f32));
-        };
-        rounded(&particles.x, &mut self.x_built);
-        rounded(&particles.y, &mut self.y_built);
         // Rounding to f32 moves a coordinate by at most 2⁻²⁴ of its magnitude (or by a
-        // subnormal step near 0), a position by √2 times that, within 2⁻²³. NaN
-        // coordinates are left out: such a disk escapes by its NaN displacement.
-        let largest = (particles.x.iter().chain(&particles.y))
-            .fold(0.0_f64, |largest, v| largest.max(v.abs()));
+        // subnormal step near 0), a position by √2 times that, within 2⁻²³: the largest
+        // magnitude is taken in the same pass. NaN coordinates are left out: such a
+        // disk escapes by its NaN displacement.
+        let rounded = |values: &[f64], record: &mut Vec<f32>| {
+            let mut largest = 0.0_f64;
+            record.clear();
+            record.extend(values.iter().map(|&value| {
+                largest = largest.max(value.abs());
+                value as f32
+            }));
+            largest
+        };
+        let largest =
+            rounded(&particles.x, &mut self.x_built).max(rounded(&particles.y, &mut self.y_built));
         self.rounding = largest * 2.0_f64.powi(-23) + f64::from(f32::MIN_POSITIVE);
         self.escaped.clear();
         self.escaped
@@ -486,7 +490,7 @@ mod tests {
     }
 
     /// The record of build positions is rounded to f32, which far from the origin is
-    /// coarse (steps of 2 near x = 2²⁴): still, every disk that truly moved half the skin
+    /// coarse (steps of 1 just below x = 2²⁴): still, every disk that truly moved half the skin
     /// is marked, and the largest displacement reported bounds the true one, at walls
     /// and through a periodic edge.
     #[test]
