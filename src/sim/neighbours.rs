@@ -304,21 +304,19 @@ impl Skin {
 
     /// Records the disks' positions as those of a build.
     pub fn record(&mut self, particles: &Particles) {
-        // Rounding to f32 moves a coordinate by at most 2⁻²⁴ of its magnitude (or by a
-        // subnormal step near 0), a position by √2 times that, within 2⁻²³: the largest
-        // magnitude is taken in the same pass. NaN coordinates are left out: such a
-        // disk escapes by its NaN displacement.
         let rounded = |values: &[f64], record: &mut Vec<f32>| {
-            let mut largest = 0.0_f64;
             record.clear();
-            record.extend(values.iter().map(|&value| {
-                largest = largest.max(value.abs());
-                value as f32
-            }));
-            largest
+            record.extend(values.iter().map(|&value| value as f32));
         };
-        let largest =
-            rounded(&particles.x, &mut self.x_built).max(rounded(&particles.y, &mut self.y_built));
+        rounded(&particles.x, &mut self.x_built);
+        rounded(&particles.y, &mut self.y_built);
+        // Rounding to f32 moves a coordinate by at most 2⁻²⁴ of its magnitude (or by a
+        // subnormal step near 0), a position by √2 times that, within 2⁻²³. NaN
+        // coordinates are left out: such a disk escapes by its NaN displacement. A pass
+        // of its own: folded into the rounding pass, the step measured 2.3% slower
+        // (serial, 20,000 disks, the CI check's A/B).
+        let largest = (particles.x.iter().chain(&particles.y))
+            .fold(0.0_f64, |largest, v| largest.max(v.abs()));
         self.rounding = largest * 2.0_f64.powi(-23) + f64::from(f32::MIN_POSITIVE);
         self.escaped.clear();
         self.escaped
