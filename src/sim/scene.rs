@@ -487,10 +487,10 @@ pub fn check_periodic_box(domain: &Domain, max_radius: f64) -> Result<(), Placem
     Ok(())
 }
 
-/// One cell of the placement grid. The first disk placed in a cell is stored inline, so
-/// a try reads its 3×3 block of cells from three short runs of memory that can be
-/// fetched ahead; further disks of the cell (cells hold about one disk) are listed
-/// through `more`.
+/// One cell of the placement grid, or one further disk of a cell. The first disk placed
+/// in a cell is stored inline, so a try reads its 3×3 block of cells from three runs of
+/// three cells (two cache lines each) that can be fetched ahead; further disks of the
+/// cell (cells hold about one disk) are chained through `more`, each in one cache line.
 #[derive(Clone, Copy)]
 #[repr(align(32))]
 struct PlacementCell {
@@ -498,7 +498,8 @@ struct PlacementCell {
     y: f64,
     /// NaN while the cell is empty: a NaN contact distance overlaps nothing.
     radius: f64,
-    /// First further disk of the cell (a placement index), or [`NO_DISK`].
+    /// The next further disk of the cell (an index into `PlacementGrid::further`), or
+    /// [`NO_DISK`].
     more: u32,
 }
 
@@ -516,19 +517,24 @@ const EMPTY_CELL: PlacementCell = PlacementCell {
 const PREFETCH_TRIES_AHEAD: usize = 16;
 
 /// One random try at placing a disk: where it lands and the 3×3 block of cells that
-/// says whether it is free.
+/// says whether it is free, as the index of the block's first cell.
 #[derive(Clone, Copy)]
 struct Try {
     x: f64,
     y: f64,
-    rows: Lines,
-    cols: Lines,
+    block: usize,
 }
 
 impl Try {
     fn at(x: f64, y: f64, grid: &PlacementGrid) -> Try {
-        let (rows, cols) = grid.block(x, y);
-        Try { x, y, rows, cols }
+        let (cx, cy) = grid.cell_of(x, y);
+        // The block's first cell is the inner cell's neighbour before it in both
+        // directions: in the framed grid, (cx, cy) itself.
+        Try {
+            x,
+            y,
+            block: cy * grid.stride + cx,
+        }
     }
 }
 
@@ -590,14 +596,23 @@ impl Lookahead {
 }
 
 /// The uniform grid of [`place_random`] and the disks placed so far.
+///
+/// The grid's cells sit inside a frame one cell wide, so that every inner cell has a
+/// full 3×3 block and a try reads three rows of three cells, with no case for edges:
+/// between walls the frame stays empty; in a periodic box each frame cell is a copy of
+/// the inner cell it stands for across the box (kept by [`PlacementGrid::insert`]).
+/// A block so reads exactly the disks the wrapped or cut-off block would.
 struct PlacementGrid {
+    /// `(n_cols + 2) × (n_rows + 2)` cells, row after row, the frame included.
     cells: Vec<PlacementCell>,
-    /// Next further disk of the same cell, by placement index.
-    more: Vec<u32>,
+    /// The disks not first in their cell, in placement order, chained by cell.
+    further: Vec<PlacementCell>,
     /// Positions by placement index.
     positions: Vec<[f64; 2]>,
     n_cols: usize,
     n_rows: usize,
+    /// Cells from one row to the next: `n_cols + 2`.
+    stride: usize,
     cell_w: f64,
     cell_h: f64,
     periodic: bool,
@@ -610,20 +625,23 @@ impl PlacementGrid {
         let cell = (2.0 * max_radius).max((domain.area() / n_particles as f64).sqrt());
         let n_cols = ((domain.width / cell).floor() as usize).max(1);
         let n_rows = ((domain.height / cell).floor() as usize).max(1);
-        let mut cells = with_huge_pages(n_cols * n_rows);
-        cells.resize(n_cols * n_rows, EMPTY_CELL);
+        let n_cells = (n_cols + 2) * (n_rows + 2);
+        let mut cells = with_huge_pages(n_cells);
+        cells.resize(n_cells, EMPTY_CELL);
         PlacementGrid {
             cells,
-            more: with_huge_pages(n_particles),
+            further: with_huge_pages(n_particles),
             positions: with_huge_pages(n_particles),
             n_cols,
             n_rows,
+            stride: n_cols + 2,
             cell_w: domain.width / n_cols as f64,
             cell_h: domain.height / n_rows as f64,
             periodic: domain.boundary == Boundary::Periodic,
         }
     }
 
+    /// The inner cell holding (x, y), as its column and row counted from 0.
     fn cell_of(&self, x: f64, y: f64) -> (usize, usize) {
         (
             ((x / self.cell_w) as usize).min(self.n_cols - 1),
@@ -631,81 +649,104 @@ impl PlacementGrid {
         )
     }
 
-    /// The cells of the 3×3 block around (x, y), as rows and columns (fewer at walls).
-    fn block(&self, x: f64, y: f64) -> (Lines, Lines) {
-        let (cx, cy) = self.cell_of(x, y);
-        let rows = neighbour_lines(cy, self.n_rows, self.periodic);
-        let cols = neighbour_lines(cx, self.n_cols, self.periodic);
-        (rows, cols)
+    /// The three rows of a try's block, each as its first cell's index.
+    #[inline(always)]
+    fn block_rows(&self, tried: &Try) -> [usize; 3] {
+        let first = tried.block;
+        [first, first + self.stride, first + 2 * self.stride]
     }
 
-    /// Asks the memory system for the 3×3 block of cells of a try.
+    /// Asks the memory system for the 3×3 block of cells of a try: each row's first and
+    /// last cell, whose lines hold the middle one too (cells are 32-byte aligned).
     fn prefetch_block(&self, tried: &Try) {
-        for &row in tried.rows.as_slice() {
-            for &col in tried.cols.as_slice() {
-                prefetch(&self.cells[row * self.n_cols + col]);
-            }
+        for row in self.block_rows(tried) {
+            prefetch(&self.cells[row]);
+            prefetch(&self.cells[row + 2]);
         }
     }
 
     /// Asks the memory system for the first further disk listed in each cell of the
     /// 3×3 block of a try.
     fn prefetch_listed(&self, tried: &Try) {
-        for &row in tried.rows.as_slice() {
-            for &col in tried.cols.as_slice() {
-                let other = self.cells[row * self.n_cols + col].more;
-                if other != NO_DISK {
-                    prefetch(&self.positions[other as usize]);
-                    prefetch(&self.more[other as usize]);
+        for row in self.block_rows(tried) {
+            for cell in &self.cells[row..row + 3] {
+                if cell.more != NO_DISK {
+                    prefetch(&self.further[cell.more as usize]);
                 }
             }
         }
     }
 
     /// Whether a disk of radius `r` at a try overlaps no disk placed so far.
-    fn is_free(&self, domain: &Domain, radii: &Radii, tried: &Try, r: f64) -> bool {
+    fn is_free(&self, domain: &Domain, tried: &Try, r: f64) -> bool {
         let overlaps = |ox: f64, oy: f64, other_r: f64| {
             let (sx, sy) = domain.separation(tried.x, tried.y, ox, oy);
             let contact = r + other_r;
             sx * sx + sy * sy < contact * contact
         };
-        for &row in tried.rows.as_slice() {
-            for &col in tried.cols.as_slice() {
-                let cell = &self.cells[row * self.n_cols + col];
+        for row in self.block_rows(tried) {
+            for cell in &self.cells[row..row + 3] {
                 if overlaps(cell.x, cell.y, cell.radius) {
                     return false;
                 }
-                let mut other = cell.more;
-                while other != NO_DISK {
-                    let [ox, oy] = self.positions[other as usize];
-                    if overlaps(ox, oy, radii.of(other as usize)) {
+                let mut next = cell.more;
+                while next != NO_DISK {
+                    let other = &self.further[next as usize];
+                    if overlaps(other.x, other.y, other.radius) {
                         return false;
                     }
-                    other = self.more[other as usize];
+                    next = other.more;
                 }
             }
         }
         true
     }
 
-    /// Adds the next disk (placement index `positions.len()`).
+    /// Adds the next disk.
     fn insert(&mut self, x: f64, y: f64, r: f64) {
-        let idx = self.positions.len() as u32;
         let (cx, cy) = self.cell_of(x, y);
-        let cell = &mut self.cells[cy * self.n_cols + cx];
+        let inner = (cy + 1) * self.stride + cx + 1;
+        let cell = &mut self.cells[inner];
+        let disk = PlacementCell {
+            x,
+            y,
+            radius: r,
+            more: NO_DISK,
+        };
         if cell.radius.is_nan() {
-            *cell = PlacementCell {
-                x,
-                y,
-                radius: r,
-                more: NO_DISK,
-            };
-            self.more.push(NO_DISK);
+            *cell = disk;
         } else {
-            self.more.push(cell.more);
-            cell.more = idx;
+            let more = std::mem::replace(&mut cell.more, self.further.len() as u32);
+            self.further.push(PlacementCell { more, ..disk });
         }
         self.positions.push([x, y]);
+        if self.periodic {
+            self.copy_to_frame(cx, cy);
+        }
+    }
+
+    /// Copies inner cell (cx, cy) to the frame cells that stand for it across a
+    /// periodic box (none unless it lies on an edge; three at a corner).
+    fn copy_to_frame(&mut self, cx: usize, cy: usize) {
+        let cell = self.cells[(cy + 1) * self.stride + cx + 1];
+        // Frame positions (framed coordinates) of this cell along one axis of n cells.
+        let images = |c: usize, n: usize| {
+            let mut framed = [c + 1, usize::MAX, usize::MAX];
+            if c == n - 1 {
+                framed[1] = 0;
+            }
+            if c == 0 {
+                framed[2] = n + 1;
+            }
+            framed
+        };
+        for row in images(cy, self.n_rows) {
+            for col in images(cx, self.n_cols) {
+                if row != usize::MAX && col != usize::MAX {
+                    self.cells[row * self.stride + col] = cell;
+                }
+            }
+        }
     }
 }
 
@@ -790,7 +831,7 @@ fn place_random(
                     Try::at(x, y, &grid)
                 }
             };
-            if grid.is_free(domain, radii, &tried, r) {
+            if grid.is_free(domain, &tried, r) {
                 break tried;
             }
         };
@@ -808,41 +849,6 @@ fn uniform_in(rng: &mut Xoshiro256PlusPlus, low: f64, high: f64) -> f64 {
         rng.random_range(low..high)
     } else {
         low
-    }
-}
-
-/// Up to three cell indices along one axis of the grid.
-#[derive(Clone, Copy)]
-struct Lines {
-    indices: [usize; 3],
-    len: usize,
-}
-
-impl Lines {
-    fn as_slice(&self) -> &[usize] {
-        &self.indices[..self.len]
-    }
-}
-
-/// Cell `c` and its two neighbours along an axis of `n` cells: wrapped when periodic,
-/// cut off at walls. Small periodic grids may list one cell more than once; placement
-/// only reads, so that is harmless.
-#[inline(always)]
-fn neighbour_lines(c: usize, n: usize, periodic: bool) -> Lines {
-    if periodic {
-        let before = if c == 0 { n - 1 } else { c - 1 };
-        let after = if c + 1 == n { 0 } else { c + 1 };
-        Lines {
-            indices: [before, c, after],
-            len: 3,
-        }
-    } else {
-        let first = c.saturating_sub(1);
-        let last = (c + 1).min(n - 1);
-        Lines {
-            indices: [first, first + 1, first + 2],
-            len: last - first + 1,
-        }
     }
 }
 
