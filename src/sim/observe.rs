@@ -25,13 +25,12 @@ pub fn observe(particles: &Particles) -> Observables {
     let mut kinetic_energy = 0.0;
     let mut momentum = [0.0, 0.0];
     // Fixed order (by id): floating-point sums are not associative.
-    for idx in particles.storage_index_by_id() {
-        let idx = idx as usize;
+    particles.for_each_in_id_order(|idx| {
         let (m, vx, vy) = (particles.mass[idx], particles.vx[idx], particles.vy[idx]);
         kinetic_energy += 0.5 * m * (vx * vx + vy * vy);
         momentum[0] += m * vx;
         momentum[1] += m * vy;
-    }
+    });
     Observables {
         kinetic_energy,
         momentum,
@@ -90,8 +89,7 @@ pub fn thermodynamics(
 /// (little-endian). Equal hashes mean bitwise-identical states.
 pub fn state_hash(particles: &Particles) -> String {
     let mut hasher = Xxh3::new();
-    for idx in particles.storage_index_by_id() {
-        let idx = idx as usize;
+    particles.for_each_in_id_order(|idx| {
         for value in [
             particles.x[idx],
             particles.y[idx],
@@ -100,7 +98,7 @@ pub fn state_hash(particles: &Particles) -> String {
         ] {
             hasher.update(&value.to_le_bytes());
         }
-    }
+    });
     format!("{:016x}", hasher.digest())
 }
 
