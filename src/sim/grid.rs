@@ -470,7 +470,7 @@ impl StripGrid {
                 // A window with `from == to` holds nothing.
                 for &(from, to) in windows.iter().filter(|(from, to)| from < to) {
                     let (from, to) = (from - slack, to + slack);
-                    let first = entries.partition_point(|b| f64::from(b.x) < from);
+                    let first = first_at_or_right_of(entries, from, width);
                     for b in entries[first..].iter().take_while(|b| f64::from(b.x) < to) {
                         let j = b.idx as usize;
                         if j == a {
@@ -716,6 +716,50 @@ trait Sink {
     unsafe fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry);
 }
 
+/// The index of the first entry of a strip (sorted by x) whose x is not below `from`:
+/// `entries.partition_point(|b| f64::from(b.x) < from)`, found from where a strip of
+/// evenly spread disks across a box `width` wide would hold it, by steps doubling away
+/// from there and then halving. A query's binary search over a whole strip of a large
+/// box misses the caches at most of its dozen probes; this one reads a few lines near
+/// the guess.
+fn first_at_or_right_of(entries: &[Entry], from: f64, width: f64) -> usize {
+    let below = |idx: usize| f64::from(entries[idx].x) < from;
+    let len = entries.len();
+    // A saturating cast: a NaN or negative guess is 0, a huge one `len`.
+    let guess = ((from / width * len as f64) as usize).min(len);
+    // The answer lies in lo..=hi.
+    let (lo, hi) = if guess < len && below(guess) {
+        let mut lo = guess + 1;
+        let mut step = 1;
+        loop {
+            let probe = guess + step;
+            if probe >= len {
+                break (lo, len);
+            }
+            if !below(probe) {
+                break (lo, probe);
+            }
+            lo = probe + 1;
+            step *= 2;
+        }
+    } else {
+        let mut hi = guess;
+        let mut step = 1;
+        loop {
+            if step > guess {
+                break (0, hi);
+            }
+            let probe = guess - step;
+            if below(probe) {
+                break (probe + 1, hi);
+            }
+            hi = probe;
+            step *= 2;
+        }
+    };
+    lo + entries[lo..hi].partition_point(|b| f64::from(b.x) < from)
+}
+
 /// How far a test on f32 entries must be widened to never reject a pair the f64
 /// positions would accept, when every coordinate involved, and every sum of them, is
 /// at most `largest` in magnitude: rounding to f32 moves a coordinate by at most
@@ -945,6 +989,57 @@ mod tests {
             })
             .collect();
         Particles::from_disks(&disks)
+    }
+
+    /// The search from a guess finds what a binary search over the whole strip finds,
+    /// wherever the guess lands: strips empty, short, crowded at one end, with equal
+    /// x's, and bounds outside the box or infinite.
+    #[test]
+    fn the_search_from_a_guess_finds_the_first_entry_a_binary_search_finds() {
+        let strip = |xs: &[f32]| -> Vec<Entry> {
+            xs.iter()
+                .enumerate()
+                .map(|(idx, &x)| Entry {
+                    x,
+                    y: 0.0,
+                    idx: idx as u32,
+                })
+                .collect()
+        };
+        let even: Vec<f32> = (0..1000).map(|k| k as f32 * 0.1).collect();
+        let crowded: Vec<f32> = (0..1000).map(|k| 90.0 + k as f32 * 0.01).collect();
+        let equal = [5.0_f32; 64];
+        let strips = [
+            strip(&[]),
+            strip(&[50.0]),
+            strip(&even),
+            strip(&crowded),
+            strip(&equal),
+        ];
+        let bounds = [
+            f64::NEG_INFINITY,
+            -3.0,
+            0.0,
+            0.05,
+            5.0,
+            5.0 + 1e-9,
+            49.95,
+            90.5,
+            99.89,
+            100.0,
+            250.0,
+            f64::INFINITY,
+        ];
+        for entries in &strips {
+            for from in bounds {
+                assert_eq!(
+                    first_at_or_right_of(entries, from, 100.0),
+                    entries.partition_point(|b| f64::from(b.x) < from),
+                    "{} entries, from {from}",
+                    entries.len()
+                );
+            }
+        }
     }
 
     fn sorted(mut pairs: Vec<[u32; 2]>) -> Vec<[u32; 2]> {
