@@ -247,12 +247,12 @@ pub const EVENT_BYTES_PER_DISK: u64 = 368;
 /// Peak resident bytes of a run before its disks: the program, its libraries, the pool.
 pub const BASE_BYTES: u64 = 32 << 20;
 /// Seconds the set-up (placement, ordering, the first grid) takes per disk of a dilute
-/// gas, from `setup_s` of the command above with `--steps 1`: 0.42 µs per disk at 10⁶
-/// and 0.58 µs at 10⁷ (packing 0.05); at 10⁷ the constant is taken, and the cost grows
-/// as 1 / (1 − packing / jamming). Measured (2026-11-23): 0.71 µs per disk at 10⁷ and
-/// packing 0.3, 1.87 µs at 0.45, 4.8 µs at 10⁶ and 0.5 (the model: 1.33, 3.4, 7.0); the
+/// gas, from `setup_s` of the command above with `--steps 1`; the cost grows as
+/// 1 / (1 − packing / jamming). Measured (2026-11-24, 23:27 UTC, one run each): 0.416 µs
+/// per disk at 10⁷ and packing 0.05, 0.43 µs at 0.3, 1.24 µs at 0.45, 3.38 µs at 10⁶ and
+/// 0.5 (the model: 0.44, 0.88, 2.3, 4.6); the dilute gas sets the constant, and the
 /// note errs long, never short.
-pub const PLACEMENT_S_PER_DISK: f64 = 0.6e-6;
+pub const PLACEMENT_S_PER_DISK: f64 = 0.4e-6;
 
 /// What a run will hold and how long building its disks takes, estimated from the spec
 /// alone (see [`STEP_BYTES_PER_DISK`] for the measurements behind it).
