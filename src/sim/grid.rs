@@ -717,47 +717,26 @@ trait Sink {
 }
 
 /// The index of the first entry of a strip (sorted by x) whose x is not below `from`:
-/// `entries.partition_point(|b| f64::from(b.x) < from)`, found from where a strip of
-/// evenly spread disks across a box `width` wide would hold it, by steps doubling away
-/// from there and then halving. A query's binary search over a whole strip of a large
-/// box misses the caches at most of its dozen probes; this one reads a few lines near
-/// the guess.
+/// `entries.partition_point(|b| f64::from(b.x) < from)`, searched in a window around
+/// where a strip of evenly spread disks across a box `width` wide would hold it, the
+/// window doubling until it brackets the answer. A query's binary search over a whole
+/// strip of a large box misses the caches at most of its dozen probes; this one reads a
+/// few lines near the guess.
 fn first_at_or_right_of(entries: &[Entry], from: f64, width: f64) -> usize {
     let below = |idx: usize| f64::from(entries[idx].x) < from;
     let len = entries.len();
     // A saturating cast: a NaN or negative guess is 0, a huge one `len`.
     let guess = ((from / width * len as f64) as usize).min(len);
-    // The answer lies in lo..=hi.
-    let (lo, hi) = if guess < len && below(guess) {
-        let mut lo = guess + 1;
-        let mut step = 1;
-        loop {
-            let probe = guess + step;
-            if probe >= len {
-                break (lo, len);
-            }
-            if !below(probe) {
-                break (lo, probe);
-            }
-            lo = probe + 1;
-            step *= 2;
+    let mut reach = 1;
+    loop {
+        let (lo, hi) = (guess.saturating_sub(reach), (guess + reach).min(len));
+        // The answer is in lo..=hi when the entry before lo is below and the one at hi
+        // is not.
+        if (lo == 0 || below(lo - 1)) && (hi == len || !below(hi)) {
+            return lo + entries[lo..hi].partition_point(|b| f64::from(b.x) < from);
         }
-    } else {
-        let mut hi = guess;
-        let mut step = 1;
-        loop {
-            if step > guess {
-                break (0, hi);
-            }
-            let probe = guess - step;
-            if below(probe) {
-                break (probe + 1, hi);
-            }
-            hi = probe;
-            step *= 2;
-        }
-    };
-    lo + entries[lo..hi].partition_point(|b| f64::from(b.x) < from)
+        reach *= 2;
+    }
 }
 
 /// How far a test on f32 entries must be widened to never reject a pair the f64

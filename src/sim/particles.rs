@@ -354,7 +354,10 @@ impl Particles {
     /// Up to [`WHOLE_ID_INDEX_MAX`] disks this goes through [`Self::storage_index_by_id`];
     /// beyond, through an index of a quarter of the ids at a time (four scans of the ids,
     /// a byte per disk held instead of four). Observing runs while a stepper holds its
-    /// lists, so this index would otherwise be the peak of a large run's memory.
+    /// lists, so this index would otherwise be the peak of a large run's memory. Small
+    /// scenes keep the plain index: one block of every id, with its range test per
+    /// disk, made the CI check's small serial run (2,000 disks, 50 steps) 1.4% more
+    /// instructions (28.85 M → 29.26 M, callgrind).
     pub fn for_each_in_id_order(&self, mut visit: impl FnMut(usize)) {
         let n = self.len();
         if n <= WHOLE_ID_INDEX_MAX {

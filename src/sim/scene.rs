@@ -439,27 +439,24 @@ fn row_order(positions: &[[f64; 2]], row_height: f64) -> Vec<u32> {
     let bucket_of = |position: &[f64; 2]| {
         ((row_of(position) / (max_row + 1.0) * n_buckets) as usize).min(n_buckets as usize - 1)
     };
-    let mut starts = vec![0u32; n_buckets as usize + 1];
-    for position in positions {
-        starts[bucket_of(position) + 1] += 1;
-    }
-    for bucket in 1..starts.len() {
-        starts[bucket] += starts[bucket - 1];
-    }
     // Sort keys scattered straight into their buckets, so that sorting reads no
     // positions at random: (row, x, placement index), unique, so an unstable sort is
     // stable. With the positions they take 40 bytes per disk, less than the finished disks.
-    let mut keys = vec![(0i64, 0i64, 0u32); positions.len()];
-    let mut next_slot = starts.clone();
-    for (idx, position) in positions.iter().enumerate() {
-        let slot = &mut next_slot[bucket_of(position)];
-        keys[*slot as usize] = (
-            total_order_key(row_of(position)),
-            total_order_key(position[0]),
-            idx as u32,
-        );
-        *slot += 1;
-    }
+    let (mut starts, mut keys) = (Vec::new(), Vec::new());
+    counting_sort(
+        positions,
+        n_buckets as usize,
+        bucket_of,
+        |idx, position| {
+            (
+                total_order_key(row_of(position)),
+                total_order_key(position[0]),
+                idx as u32,
+            )
+        },
+        &mut starts,
+        &mut keys,
+    );
     let mut scratch = BucketScratch::default();
     for bucket in starts.windows(2) {
         scratch.sort(&mut keys[bucket[0] as usize..bucket[1] as usize]);
@@ -486,43 +483,72 @@ impl BucketScratch {
     /// since the bin only grows with x; anything else is sorted as it is.
     fn sort(&mut self, keys: &mut [RowKey]) {
         const SMALL: usize = 32;
+        if keys.len() <= SMALL || keys.iter().any(|key| key.0 != keys[0].0) {
+            keys.sort_unstable();
+            return;
+        }
         let x_of = |key: &RowKey| f64::from_bits(total_order_key_inverse(key.1));
         let (lo, hi) = keys
             .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), key| {
-                (lo.min(x_of(key)), hi.max(x_of(key)))
+            .map(x_of)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+                (lo.min(x), hi.max(x))
             });
-        let one_row = keys.iter().all(|key| key.0 == keys[0].0);
-        if keys.len() <= SMALL || !one_row || !(hi - lo).is_normal() {
+        if !(hi - lo).is_normal() {
             keys.sort_unstable();
             return;
         }
         let n_bins = keys.len();
         let scale = n_bins as f64 / (hi - lo);
         let bin_of = |key: &RowKey| (((x_of(key) - lo) * scale) as usize).min(n_bins - 1);
-        self.starts.clear();
-        self.starts.resize(n_bins + 1, 0);
-        for key in keys.iter() {
-            self.starts[bin_of(key) + 1] += 1;
-        }
-        for bin in 1..=n_bins {
-            self.starts[bin] += self.starts[bin - 1];
-        }
-        self.sorted.clear();
-        self.sorted.resize(keys.len(), (0, 0, 0));
-        for key in keys.iter() {
-            let slot = &mut self.starts[bin_of(key)];
-            self.sorted[*slot as usize] = *key;
-            *slot += 1;
-        }
-        // Each bin's start moved to its end, which is the next bin's start.
-        let mut start = 0;
-        for &end in &self.starts[..n_bins] {
-            self.sorted[start..end as usize].sort_unstable();
-            start = end as usize;
+        counting_sort(
+            keys,
+            n_bins,
+            bin_of,
+            |_, key| *key,
+            &mut self.starts,
+            &mut self.sorted,
+        );
+        for bin in self.starts.windows(2) {
+            self.sorted[bin[0] as usize..bin[1] as usize].sort_unstable();
         }
         keys.copy_from_slice(&self.sorted);
     }
+}
+
+/// A stable counting sort: `make(idx, item)` for every item (`idx` its index), grouped by
+/// `bin_of(item)` (below `n_bins`) in bin order, into `out`. `starts` ends as each bin's
+/// first slot, with the number of items last.
+fn counting_sort<T, U>(
+    items: &[T],
+    n_bins: usize,
+    bin_of: impl Fn(&T) -> usize,
+    make: impl Fn(usize, &T) -> U,
+    starts: &mut Vec<u32>,
+    out: &mut Vec<U>,
+) {
+    starts.clear();
+    starts.resize(n_bins + 1, 0);
+    for item in items {
+        starts[bin_of(item) + 1] += 1;
+    }
+    for bin in 1..=n_bins {
+        starts[bin] += starts[bin - 1];
+    }
+    out.clear();
+    out.reserve(items.len());
+    let slots = out.spare_capacity_mut();
+    for (idx, item) in items.iter().enumerate() {
+        let slot = &mut starts[bin_of(item)];
+        slots[*slot as usize].write(make(idx, item));
+        *slot += 1;
+    }
+    // SAFETY: the bins' slots are consecutive from 0 and each bin received exactly its
+    // counted items, so every one of the `items.len()` slots was written once.
+    unsafe { out.set_len(items.len()) };
+    // Each bin's slot has moved on to its end, the next bin's start: shift them back.
+    starts.copy_within(0..n_bins, 1);
+    starts[0] = 0;
 }
 
 /// An integer that orders like `f64::total_cmp` (the same bit trick).
@@ -794,23 +820,25 @@ impl PlacementGrid {
     /// Copies inner cell (cx, cy) to the frame cells that stand for it across a
     /// periodic box (none unless it lies on an edge; three at a corner).
     fn copy_to_frame(&mut self, cx: usize, cy: usize) {
+        let on_edge = |c: usize, n: usize| c == 0 || c == n - 1;
+        if !on_edge(cx, self.n_cols) && !on_edge(cy, self.n_rows) {
+            return;
+        }
         let cell = self.cells[(cy + 1) * self.stride + cx + 1];
-        // Frame positions (framed coordinates) of this cell along one axis of n cells.
-        let images = |c: usize, n: usize| {
-            let mut framed = [c + 1, usize::MAX, usize::MAX];
-            if c == n - 1 {
-                framed[1] = 0;
-            }
-            if c == 0 {
-                framed[2] = n + 1;
-            }
-            framed
+        // Where the cell stands along one axis of n cells, in framed coordinates: its
+        // own place, and the frame across the box from an edge it is on.
+        let places = |c: usize, n: usize| {
+            [
+                Some(c + 1),
+                (c == n - 1).then_some(0),
+                (c == 0).then_some(n + 1),
+            ]
+            .into_iter()
+            .flatten()
         };
-        for row in images(cy, self.n_rows) {
-            for col in images(cx, self.n_cols) {
-                if row != usize::MAX && col != usize::MAX {
-                    self.cells[row * self.stride + col] = cell;
-                }
+        for row in places(cy, self.n_rows) {
+            for col in places(cx, self.n_cols) {
+                self.cells[row * self.stride + col] = cell;
             }
         }
     }
