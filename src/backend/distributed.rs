@@ -446,9 +446,6 @@ impl RankState {
             &mut self.shared,
             seen_elsewhere,
         );
-        self.schedule
-            .order
-            .arrange(particles.len(), &mut self.contacts);
     }
 
     fn resolve_own_chains(&mut self, dt: f64) {

@@ -262,7 +262,6 @@ impl ThreadedStepper {
                         list.find_contacts(particles, domain, &mut contacts);
                         // Split while the pairs are in list order, close in memory.
                         schedule.split(particles.len(), &mut contacts, &mut handed_over, pinned);
-                        schedule.order.arrange(particles.len(), &mut contacts);
                         *band_contacts = contacts;
                         *band_handed_over = handed_over;
                     });

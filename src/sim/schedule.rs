@@ -17,13 +17,12 @@ use super::grid::Contact;
 
 /// Scratch memory for splitting contacts by chain, per storage index: the union–find
 /// parent, and whether the disk's chain holds a pinned disk (valid for disks in this
-/// step's contacts only).
+/// step's chained contacts only), and the scratch of the resolution order.
 #[derive(Clone, Debug, Default)]
 pub struct ContactSchedule {
     parent: Vec<u32>,
     pinned: Vec<bool>,
-    /// The order the kept contacts are resolved in.
-    pub order: ResolutionOrder,
+    order: ResolutionOrder,
 }
 
 /// Scratch memory for putting one worker's contacts in an order that resolves to the
@@ -68,6 +67,19 @@ impl ResolutionOrder {
     /// reads nearby memory; canonical order alone reads disks in random places.
     /// `n_particles` bounds the storage indices.
     pub fn arrange(&mut self, n_particles: usize, contacts: &mut Vec<Contact>) {
+        let mut chained = self.set_apart_chained(n_particles, contacts);
+        Self::append_in_canonical_order(contacts, &mut chained);
+        self.chained = chained;
+    }
+
+    /// Moves the pairs that share a disk with another out of `contacts` (which keeps the
+    /// lone pairs, in order) into the returned scratch vector, in order. Leaves the
+    /// per-disk counts at 0.
+    fn set_apart_chained(
+        &mut self,
+        n_particles: usize,
+        contacts: &mut Vec<Contact>,
+    ) -> Vec<Contact> {
         self.holding.resize(n_particles, 0);
         for contact in contacts.iter() {
             for disk in [contact.a, contact.b] {
@@ -89,17 +101,25 @@ impl ResolutionOrder {
             self.holding[contact.a as usize] = 0;
             self.holding[contact.b as usize] = 0;
         }
+        chained
+    }
+
+    /// Appends `chained` to `contacts` in canonical order, a pair found twice once.
+    fn append_in_canonical_order(contacts: &mut Vec<Contact>, chained: &mut Vec<Contact>) {
         chained.sort_unstable_by_key(|contact| contact.key);
         chained.dedup_by_key(|contact| contact.key);
-        contacts.extend_from_slice(&chained);
-        self.chained = chained;
+        contacts.extend_from_slice(chained);
     }
 }
 
 impl ContactSchedule {
-    /// Keeps in `contacts` those of the chains with no `pinned` disk (by storage index),
-    /// in the same order, and appends the others to `handed_over`, in the same order.
-    /// `n_particles` bounds the storage indices.
+    /// Keeps in `contacts` the chains with no `pinned` disk (by storage index), in
+    /// resolution order ([`ResolutionOrder::arrange`]), and appends the others to
+    /// `handed_over`. `n_particles` bounds the storage indices.
+    ///
+    /// A lone pair (no disk shared with another pair) is a chain of its own, decided by
+    /// its two disks; only the pairs that share disks, a small part of a step's, go
+    /// through the union–find.
     pub fn split(
         &mut self,
         n_particles: usize,
@@ -107,22 +127,44 @@ impl ContactSchedule {
         handed_over: &mut Vec<Contact>,
         pinned: impl Fn(u32) -> bool,
     ) {
+        let mut chained = self.order.set_apart_chained(n_particles, contacts);
+        contacts.retain(|contact| {
+            let keep = !pinned(contact.a) && !pinned(contact.b);
+            if !keep {
+                handed_over.push(*contact);
+            }
+            keep
+        });
+        self.split_chained(n_particles, &mut chained, handed_over, &pinned);
+        ResolutionOrder::append_in_canonical_order(contacts, &mut chained);
+        self.order.chained = chained;
+    }
+
+    /// Keeps in `chained` those of the chains with no `pinned` disk, in the same order,
+    /// and appends the others to `handed_over`, in the same order: a union–find over the
+    /// disks of these contacts only.
+    fn split_chained(
+        &mut self,
+        n_particles: usize,
+        chained: &mut Vec<Contact>,
+        handed_over: &mut Vec<Contact>,
+        pinned: impl Fn(u32) -> bool,
+    ) {
         self.parent.resize(n_particles, 0);
         self.pinned.resize(n_particles, false);
-        // Only the disks in contacts are touched: O(contacts), not O(disks).
-        for contact in contacts.iter() {
+        for contact in chained.iter() {
             for disk in [contact.a, contact.b] {
                 self.parent[disk as usize] = disk;
                 self.pinned[disk as usize] = pinned(disk);
             }
         }
-        for contact in contacts.iter() {
+        for contact in chained.iter() {
             let root_a = self.root_halving(contact.a);
             let root_b = self.root_halving(contact.b);
             self.parent[root_b as usize] = root_a;
             self.pinned[root_a as usize] |= self.pinned[root_b as usize];
         }
-        contacts.retain(|contact| {
+        chained.retain(|contact| {
             let keep = !self.pinned[self.root(contact.a) as usize];
             if !keep {
                 handed_over.push(*contact);
@@ -186,6 +228,71 @@ mod tests {
             handed_over,
             vec![contact(2, 3), contact(3, 4), contact(5, 4)]
         );
+    }
+
+    /// Against a reference that labels every chain by a flood over all contacts: the
+    /// kept pairs are those of the chains without a pinned disk, in resolution order
+    /// (as `arrange` orders them), and every other pair is handed over, once.
+    #[test]
+    fn a_split_keeps_the_unpinned_chains_in_resolution_order_and_hands_over_the_rest() {
+        let mut schedule = ContactSchedule::default();
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = |bound: u32| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state % u64::from(bound)) as u32
+        };
+        for round in 0..200 {
+            let n = 6 + next(60);
+            let mut contacts: Vec<Contact> = (0..next(40))
+                .map(|_| (next(n), next(n)))
+                .filter(|(a, b)| a != b)
+                .map(|(a, b)| contact(a, b))
+                .collect();
+            contacts.dedup_by_key(|c| c.key);
+            let pinned: Vec<bool> = (0..n).map(|_| next(8) == 0).collect();
+            // Reference: chain labels by repeated relaxation to the smallest disk.
+            let mut label: Vec<u32> = (0..n).collect();
+            loop {
+                let mut changed = false;
+                for c in &contacts {
+                    let low = label[c.a as usize].min(label[c.b as usize]);
+                    for disk in [c.a, c.b] {
+                        changed |= label[disk as usize] != low;
+                        label[disk as usize] = low;
+                    }
+                }
+                if !changed {
+                    break;
+                }
+            }
+            let chain_pinned = |c: &Contact| {
+                (0..n).any(|d| pinned[d as usize] && label[d as usize] == label[c.a as usize])
+            };
+            let mut expected_kept: Vec<Contact> = contacts
+                .iter()
+                .copied()
+                .filter(|c| !chain_pinned(c))
+                .collect();
+            ResolutionOrder::default().arrange(n as usize, &mut expected_kept);
+            let mut expected_handed: Vec<u64> = contacts
+                .iter()
+                .filter(|c| chain_pinned(c))
+                .map(|c| c.key)
+                .collect();
+            expected_handed.sort_unstable();
+
+            let mut kept = contacts.clone();
+            let mut handed_over = Vec::new();
+            schedule.split(n as usize, &mut kept, &mut handed_over, |d| {
+                pinned[d as usize]
+            });
+            let mut handed: Vec<u64> = handed_over.iter().map(|c| c.key).collect();
+            handed.sort_unstable();
+            assert_eq!(kept, expected_kept, "round {round}");
+            assert_eq!(handed, expected_handed, "round {round}");
+        }
     }
 
     #[test]
