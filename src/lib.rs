@@ -20,3 +20,8 @@ pub mod stats;
 pub mod study;
 pub mod system;
 pub mod view;
+
+/// Large allocations on transparent huge pages ([`system::huge_pages`]): for every binary
+/// and test that links this library.
+#[global_allocator]
+static ALLOCATOR: system::huge_pages::HugePageAllocator = system::huge_pages::HugePageAllocator;
