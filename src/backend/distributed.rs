@@ -2,15 +2,19 @@
 //! that gives the serial bits for any rank count.
 //!
 //! Each rank owns a slab of whole strips (cut so that the initial disks are shared out
-//! evenly; counts need not divide the box). Per step a rank moves its disks, refreshes
-//! its strips, hands the disks that left its slab to their new owners (migration),
-//! sends the disks of its first strip to the rank below as ghosts (halo), and finds
-//! the pairs its strips scan (its last strip scans the ghosts above it). Chains of
-//! contacts with no ghost and no exported disk are the rank's alone and resolved there,
-//! in canonical order. Every other chain may span ranks: its contacts (with both
-//! disks' states) are gathered on every rank, which resolve them all in canonical
-//! order and keep the new state of their own disks. So every chain sees its contacts
-//! in the serial order, which is why the bits agree.
+//! evenly; counts need not divide the box). Per step a rank moves its disks, and the
+//! ranks decide together, by the serial stepper's rule, whether to rebuild their lists:
+//! then each refreshes its strips and hands the disks that left its slab to their new
+//! owners (migration); otherwise the disks that escaped the lists are served by queries
+//! on every rank whose strips they may reach (reported in the same gather). Each rank
+//! sends the disks of its first strip to the rank below as ghosts (halo), and finds the
+//! pairs its strips scan (its last strip scans the ghosts above it). Chains of contacts
+//! with no ghost, no other rank's escapee and no disk another rank sees (exported or
+//! reported) are the rank's alone and resolved there, in canonical order. Every other
+//! chain may span ranks: its contacts (with both disks' states) are gathered on every
+//! rank, which resolve them all in canonical order and keep the new state of their own
+//! disks. So every chain sees its contacts in the serial order, which is why the bits
+//! agree.
 
 use std::collections::HashMap;
 use std::ops::{ControlFlow, Range};
@@ -190,6 +194,10 @@ struct RankState {
     /// The own disks in the slab's first strip at the last build, when a rank below
     /// sees them as its ghosts.
     exported: DiskSet,
+    /// This step's own disks that escaped the list (storage indices, in order).
+    escapees: Vec<u32>,
+    /// Those of them reported to the other ranks, whose strips their queries may reach.
+    sent: DiskSet,
     builds_since_reorder: u32,
     movers: Vec<Mover>,
     contacts: Vec<Contact>,
@@ -200,6 +208,36 @@ struct RankState {
     /// What the resolution of shared chains did: the same on every rank, counted once.
     shared_counters: StepCounters,
     stages: StageSeconds,
+}
+
+/// A rank's report on the disks that escaped its list, as gathered on every rank: a
+/// header (the largest displacement, the escapee count, the own disk count, as f64),
+/// then the escapees other ranks must query, packed ([`Particles::pack`]).
+struct EscapeeReport {
+    moved_sq: f64,
+    n_escapees: usize,
+    n_disks: usize,
+}
+
+impl EscapeeReport {
+    const HEADER_LEN: usize = 3;
+
+    fn header(&self) -> Vec<f64> {
+        vec![self.moved_sq, self.n_escapees as f64, self.n_disks as f64]
+    }
+
+    fn read(report: &[f64]) -> EscapeeReport {
+        EscapeeReport {
+            moved_sq: report[0],
+            n_escapees: report[1] as usize,
+            n_disks: report[2] as usize,
+        }
+    }
+
+    /// The packed disks after the header.
+    fn disks(report: &[f64]) -> &[f64] {
+        &report[Self::HEADER_LEN..]
+    }
 }
 
 impl RankState {
@@ -252,6 +290,8 @@ impl RankState {
             contacts: Vec::new(),
             shared: Vec::new(),
             exported: DiskSet::default(),
+            escapees: Vec::new(),
+            sent: DiskSet::default(),
             schedule: ContactSchedule::default(),
             counters: StepCounters::default(),
             shared_counters: StepCounters::default(),
@@ -272,17 +312,26 @@ impl RankState {
             );
             self.counters.merge(&walls);
         });
-        // Every rank rebuilds its list when any disk moved half the skin: the ghosts it
-        // lists are another rank's disks. Between builds disks stay with the rank that
-        // held them at the build, and the ghosts are the same disks, in the same order.
-        let moved_sq = timed(&mut stages.broad_phase, || self.largest_displacement_sq());
-        let moved_sq = timed(&mut stages.communication, || {
-            comm.all_gather(&[moved_sq])
+        // The ranks rebuild their lists together, exactly when the serial stepper would
+        // (the ghosts a rank lists are another rank's disks); until then, disks stay with
+        // the rank that held them at the build, the ghosts are the same disks in the same
+        // order, and the disks that escaped the lists are served by queries, on every
+        // rank whose strips they may reach.
+        let report = timed(&mut stages.broad_phase, || self.escapee_report());
+        let reports = timed(&mut stages.communication, || comm.all_gather(&report));
+        let (moved_sq, n_escapees, n_disks) =
+            reports
                 .iter()
-                .flatten()
-                .fold(0.0, |a, &b| larger(a, b))
-        });
-        let rebuild = self.skin.is_exceeded(moved_sq);
+                .fold((0.0, 0, 0), |(moved_sq, n_escapees, n_disks), report| {
+                    let header = EscapeeReport::read(report);
+                    (
+                        larger(moved_sq, header.moved_sq),
+                        n_escapees + header.n_escapees,
+                        n_disks + header.n_disks,
+                    )
+                });
+        let stale = self.skin.is_exceeded(moved_sq);
+        let rebuild = stale && !self.skin.may_patch(n_escapees, n_disks, moved_sq);
         if rebuild {
             let emigrants = timed(&mut stages.broad_phase, || self.refresh(comm.size()));
             let immigrants = timed(&mut stages.communication, || comm.exchange(&emigrants));
@@ -296,7 +345,11 @@ impl RankState {
             comm.exchange(&self.halo(comm.size()))
         });
         timed(&mut stages.broad_phase, || {
-            self.find_contacts(&ghosts, rebuild)
+            let escapees = match (rebuild, stale) {
+                (false, true) => Some((&reports[..], moved_sq.sqrt())),
+                _ => None,
+            };
+            self.find_contacts(&ghosts, rebuild, escapees, comm.rank())
         });
         timed(&mut stages.collisions, || self.resolve_own_chains(dt));
         let shared = timed(&mut stages.communication, || {
@@ -308,11 +361,38 @@ impl RankState {
         self.stages = stages;
     }
 
-    /// The square of the largest distance an own disk moved since the last build
-    /// (infinite before the first).
-    fn largest_displacement_sq(&mut self) -> f64 {
-        self.skin
-            .largest_displacement_sq(&self.particles, &self.domain)
+    /// What the other ranks need to know of this rank's disks that escaped the list:
+    /// the header of an [`EscapeeReport`], then, packed, those whose queries may read
+    /// another rank's strips (marked in `sent`). Notes the own escapees in `escapees`.
+    fn escapee_report(&mut self) -> Vec<f64> {
+        let n_own = self.particles.len();
+        let moved_sq = self
+            .skin
+            .largest_displacement_sq(&self.particles, &self.domain);
+        self.escapees.clear();
+        self.sent.clear(n_own);
+        if self.skin.is_exceeded(moved_sq) && self.skin.may_reach(moved_sq) {
+            self.skin.escapees(0..n_own, &mut self.escapees);
+        }
+        let mut report = EscapeeReport {
+            moved_sq,
+            n_escapees: self.escapees.len(),
+            n_disks: n_own,
+        }
+        .header();
+        // Queries serve escapees only while none moved further than this.
+        let moved = self.skin.patch_reach();
+        for &idx in &self.escapees {
+            let (y, radius) = (
+                self.particles.y[idx as usize],
+                self.particles.radius[idx as usize],
+            );
+            if self.grid.query_leaves_owned(y, radius, moved, &self.domain) {
+                self.particles.pack(idx as usize, &mut report);
+                self.sent.insert(idx);
+            }
+        }
+        report
     }
 
     /// Re-sorts the slab after the disks moved; returns, packed per destination rank,
@@ -410,11 +490,23 @@ impl RankState {
     }
 
     /// Appends the ghosts after the own disks, rebuilds the list (with `rebuild`), finds
-    /// the listed pairs that overlap, and splits them into chains of the rank's own and
-    /// chains to share.
-    fn find_contacts(&mut self, ghosts: &[Vec<f64>], rebuild: bool) {
+    /// the listed pairs that overlap and, with `escapees` (every rank's report and a
+    /// bound on how far any disk moved), the pairs of the escapees that involve an own
+    /// disk, and splits them into chains of the rank's own and chains to share.
+    fn find_contacts(
+        &mut self,
+        ghosts: &[Vec<f64>],
+        rebuild: bool,
+        escapees: Option<(&[Vec<f64>], f64)>,
+        me: usize,
+    ) {
         let n_own = self.particles.len();
         self.n_own = n_own;
+        if rebuild {
+            // The disks were re-stored: this step's escapees are served by the new list.
+            self.escapees.clear();
+            self.sent.clear(n_own);
+        }
         if let Some(from) = self.ghosts_from {
             self.particles.unpack_append(&ghosts[from]);
         }
@@ -435,10 +527,15 @@ impl RankState {
         self.contacts.clear();
         self.list
             .find_contacts(&self.particles, &self.domain, &mut self.contacts);
-        let (particles, exported) = (&self.particles, &self.exported);
-        // Ghosts and exported disks (those of the first strip at the build) are seen by
-        // another rank too: their chains are shared.
-        let seen_elsewhere = |disk: u32| disk as usize >= n_own || exported.contains(disk);
+        if let Some((reports, moved)) = escapees {
+            self.find_contacts_of_escapees(reports, moved, me);
+        }
+        let (particles, exported, sent) = (&self.particles, &self.exported, &self.sent);
+        // Ghosts, the other ranks' escapees, exported disks (those of the first strip at
+        // the build) and escapees sent to other ranks are seen by another rank too:
+        // their chains are shared.
+        let seen_elsewhere =
+            |disk: u32| disk as usize >= n_own || exported.contains(disk) || sent.contains(disk);
         self.shared.clear();
         self.schedule.split(
             particles.len(),
@@ -446,6 +543,28 @@ impl RankState {
             &mut self.shared,
             seen_elsewhere,
         );
+    }
+
+    /// Appends the other ranks' reported escapees after the ghosts, and adds to the
+    /// contacts the pairs that queries around every escapee (own and reported) find in
+    /// this rank's grid and that hold an own disk (the others are another rank's to
+    /// find). A reported escapee may be a ghost here too: the same disk under two
+    /// storage indices, never paired with itself.
+    fn find_contacts_of_escapees(&mut self, reports: &[Vec<f64>], moved: f64, me: usize) {
+        let first_reported = self.particles.len();
+        for (_, report) in reports.iter().enumerate().filter(|&(rank, _)| rank != me) {
+            self.particles.unpack_append(EscapeeReport::disks(report));
+        }
+        let mut queried = self.escapees.clone();
+        queried.extend(first_reported as u32..self.particles.len() as u32);
+        let mut found = Vec::new();
+        self.grid
+            .find_contacts_of(&queried, moved, &self.particles, &self.domain, &mut found);
+        let (n_own, id) = (self.n_own, &self.particles.id);
+        self.contacts.extend(found.into_iter().filter(|contact| {
+            let (a, b) = (contact.a as usize, contact.b as usize);
+            (a < n_own || b < n_own) && id[a] != id[b]
+        }));
     }
 
     fn resolve_own_chains(&mut self, dt: f64) {
@@ -490,8 +609,10 @@ impl RankState {
                 contacts.push(Contact::new(&disks, slot_a as usize, slot_b as usize));
             }
         }
-        // Canonical order: every rank resolves the same list the same way.
+        // Canonical order: every rank resolves the same list the same way. A pair of an
+        // escapee may have been found by two ranks: resolved once.
         contacts.sort_unstable_by_key(|contact| contact.key);
+        contacts.dedup_by_key(|contact| contact.key);
         resolve_contacts(
             &mut disks,
             &self.domain,
@@ -502,7 +623,7 @@ impl RankState {
             |_| {},
         );
         // Own disks in shared chains: those in this rank's shared contacts, and exported
-        // ones, which another rank's contacts may hold.
+        // and reported ones, which another rank's contacts may hold.
         let n_own = self.n_own;
         let mut own_slots: HashMap<u32, usize> = HashMap::new();
         for contact in &self.shared {
@@ -517,6 +638,9 @@ impl RankState {
                 let idx = entry.idx() as usize;
                 own_slots.insert(self.particles.id[idx], idx);
             }
+        }
+        for &idx in self.escapees.iter().filter(|&&idx| self.sent.contains(idx)) {
+            own_slots.insert(self.particles.id[idx as usize], idx as usize);
         }
         for (slot, id) in disks.id.iter().enumerate() {
             if let Some(&idx) = own_slots.get(id) {
@@ -605,6 +729,59 @@ mod tests {
                 "{ranks} ranks"
             );
         }
+    }
+
+    /// A fast disk of one rank's slab, two strips above the boundary, escapes the lists
+    /// and meets a slow disk of the rank below before the lists are rebuilt. Neither
+    /// rank's list holds the pair, and neither rank holds both disks: only the escapee's
+    /// report to the rank below finds it, as the serial stepper's query does.
+    #[test]
+    fn an_escapee_meets_a_disk_of_the_rank_below_as_in_the_serial_run() {
+        use crate::sim::Scene;
+        use crate::sim::particles::Disk;
+        use crate::sim::scene::Domain;
+        let disk = |x: f64, y: f64, vy: f64| Disk {
+            x,
+            y,
+            vx: 0.0,
+            vy,
+            radius: 0.5,
+            mass: 1.0,
+        };
+        // Disks at rest on the left, so that the escapee is one of few (the lists then
+        // serve it by queries); skin 12·|v|·dt = 0.6, strips 1.6 tall; the ranks meet
+        // at y = 19.2, with the slow disk in the strip below and the fast one in the
+        // second strip above.
+        let mut disks: Vec<Disk> = (0..100)
+            .map(|k| {
+                disk(
+                    1.5 + 2.0 * (k % 10) as f64,
+                    1.5 + 3.8 * (k / 10) as f64,
+                    0.0,
+                )
+            })
+            .collect();
+        disks.push(disk(30.0, 19.1, 0.45));
+        disks.push(disk(30.0, 20.9, -1.0));
+        let scene = Scene {
+            domain: Domain {
+                width: 40.0,
+                height: 40.0,
+                boundary: Boundary::Walls,
+            },
+            physics: Physics::with_restitution(1.0),
+            particles: Particles::from_disks(&disks),
+        };
+        let spec = RunSpec {
+            scene: SceneSource::Explicit(scene),
+            method: MethodSpec::stepped(0.05, 20, Broadphase::Grid),
+            slowdown: InjectedSlowdown::NONE,
+        };
+        let reference = serial::run(&spec).unwrap().summary;
+        assert_eq!(reference.pair_collisions, 1, "the two disks meet");
+        let summary = run_on_threads(&spec, 2).summary;
+        assert_eq!(summary.pair_collisions, 1);
+        assert_eq!(summary.state_hash, reference.state_hash);
     }
 
     #[test]

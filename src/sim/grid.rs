@@ -215,6 +215,44 @@ impl StripGrid {
         self.first..self.first + self.n_owned
     }
 
+    /// Where the strip with global index `strip` is held: its index in `strips`, if the
+    /// grid holds it (owned, or the ghost strip).
+    fn local_strip(&self, strip: usize) -> Option<usize> {
+        let owned = strip.wrapping_sub(self.first);
+        if owned < self.n_owned {
+            Some(owned)
+        } else {
+            (self.ghost_strip() == Some(strip)).then_some(self.n_owned)
+        }
+    }
+
+    /// Whether a query ([`StripGrid::find_contacts_of`]) around a disk of radius
+    /// `radius` at height `y`, when disks moved up to `moved`, may read strips this grid
+    /// does not own.
+    pub fn query_leaves_owned(&self, y: f64, radius: f64, moved: f64, domain: &Domain) -> bool {
+        if self.n_owned == self.layout.n_strips {
+            return false;
+        }
+        let reach = self.query_reach(radius, moved);
+        let inv_height = self.layout.inv_strip_height;
+        let lowest = ((y - reach) * inv_height).floor();
+        let highest = ((y + reach) * inv_height).floor();
+        // At walls the edge strips hold the disks beyond them: clamped as the query does.
+        let last = (self.layout.n_strips - 1) as f64;
+        let (lowest, highest) = match domain.boundary {
+            Boundary::Periodic => (lowest, highest),
+            Boundary::Walls => (lowest.clamp(0.0, last), highest.clamp(0.0, last)),
+        };
+        let owned = self.owned();
+        !(lowest >= owned.start as f64 && highest < owned.end as f64)
+    }
+
+    /// How far from a disk of radius `radius` a query looks, when disks moved up to
+    /// `moved` since the build: widened by a relative 1e-9, as the layout's reach.
+    fn query_reach(&self, radius: f64, moved: f64) -> f64 {
+        (radius + self.layout.max_radius + moved) * (1.0 + 1e-9)
+    }
+
     /// Global index of the ghost strip, if this grid has one.
     pub fn ghost_strip(&self) -> Option<usize> {
         (self.strips.len() > self.n_owned)
@@ -397,12 +435,13 @@ impl StripGrid {
         self.scan_in(strips, particles, domain, skin, &mut PairSink { pairs });
     }
 
-    /// Appends every pair of a disk stored at one of `movers` and another disk that
-    /// overlap now, when no disk is further than `moved` from its position at the last
-    /// build (which the grid holds): a query around each mover of the strips and x
-    /// windows within `r_mover + max_radius + moved` of it. A pair may be appended
-    /// twice (by both its disks, or by this and a neighbour list): the caller sorts and
-    /// removes repeats. The overlap test is the scan's arithmetic.
+    /// Appends every pair of a disk stored at one of `movers` and another disk of the
+    /// grid that overlap now, when no disk is further than `moved` from its position at
+    /// the last build (which the grid holds): a query around each mover of the strips
+    /// (those the grid holds: owned and ghost) and x windows within
+    /// `r_mover + max_radius + moved` of it. A mover need not be in the grid. A pair
+    /// may be appended twice (by both its disks, or by this and a neighbour list): the
+    /// caller sorts and removes repeats. The overlap test is the scan's arithmetic.
     pub fn find_contacts_of(
         &self,
         movers: &[u32],
@@ -411,10 +450,6 @@ impl StripGrid {
         domain: &Domain,
         contacts: &mut Vec<Contact>,
     ) {
-        debug_assert!(
-            self.first == 0 && self.strips.len() == self.n_owned,
-            "a whole grid"
-        );
         match domain.boundary {
             Boundary::Walls => self.query::<false>(movers, moved, particles, domain, contacts),
             Boundary::Periodic => self.query::<true>(movers, moved, particles, domain, contacts),
@@ -435,7 +470,7 @@ impl StripGrid {
         for &mover in movers {
             let a = mover as usize;
             let (xa, ya) = (x[a], y[a]);
-            let reach = (radius[a] + self.layout.max_radius + moved) * (1.0 + 1e-9);
+            let reach = self.query_reach(radius[a], moved);
             let inv_height = self.layout.inv_strip_height;
             let lowest = ((ya - reach) * inv_height).floor() as i64;
             let highest = ((ya + reach) * inv_height).floor() as i64;
@@ -466,7 +501,10 @@ impl StripGrid {
             // inside them (at most |xa| + reach, or the box's width when periodic).
             let slack = rounding_slack(xa.abs().max(width) + reach);
             for strip in first_strip..=last_strip {
-                let entries = &self.strips[strip.rem_euclid(n_strips) as usize][..];
+                let Some(local) = self.local_strip(strip.rem_euclid(n_strips) as usize) else {
+                    continue;
+                };
+                let entries = &self.strips[local][..];
                 // A window with `from == to` holds nothing.
                 for &(from, to) in windows.iter().filter(|(from, to)| from < to) {
                     let (from, to) = (from - slack, to + slack);

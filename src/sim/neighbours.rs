@@ -298,8 +298,14 @@ impl Skin {
     /// True when queries may serve disks that moved √`largest_displacement_sq`: at most
     /// [`MAX_PATCH_SKINS`] skins.
     pub fn may_reach(&self, largest_displacement_sq: f64) -> bool {
-        let reach = MAX_PATCH_SKINS * self.width;
+        let reach = self.patch_reach();
         largest_displacement_sq <= reach * reach
+    }
+
+    /// The furthest a disk may have moved while queries serve the escapees:
+    /// [`MAX_PATCH_SKINS`] skins.
+    pub fn patch_reach(&self) -> f64 {
+        MAX_PATCH_SKINS * self.width
     }
 
     /// Records the disks' positions as those of a build.
