@@ -53,22 +53,22 @@ pub struct Measured {
 /// rates from the last, the first to time them with the state cold in the caches).
 /// The step method's rates are the median of three later runs of
 /// `cargo bench --features mpi --bench kernels -- '^step/'` on the same machine, idle
-/// (2026-11-24, 23:23–23:27 UTC; the runs differed by up to 9%), after the escapee
-/// queries' search from a guess (docs/performance.md, 23:15 UTC); they moved by −6% to
-/// +2% from the rates of 20:43 UTC (the machine drifts by as much).
+/// (2026-11-25, 02:04–02:08 UTC; the runs differed by up to 23% at 10⁶ and 0.05, 13%
+/// elsewhere), with large allocations on huge pages (docs/performance.md, 02:10 UTC);
+/// they moved by +1% to +6% from the rates of 2026-11-24, 23:23 UTC.
 /// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [
-        measured(1e4, 0.05, 92.4e6, 0.947e6, 432e6),
-        measured(1e4, 0.3, 51.9e6, 1.49e6, 457e6),
+        measured(1e4, 0.05, 96.2e6, 0.947e6, 432e6),
+        measured(1e4, 0.3, 54.5e6, 1.49e6, 457e6),
     ],
     [
-        measured(1e5, 0.05, 86.5e6, 0.235e6, 68.0e6),
-        measured(1e5, 0.3, 52.1e6, 0.612e6, 90.6e6),
+        measured(1e5, 0.05, 89.0e6, 0.235e6, 68.0e6),
+        measured(1e5, 0.3, 52.4e6, 0.612e6, 90.6e6),
     ],
     [
-        measured(1e6, 0.05, 66.2e6, 0.190e6, 79.6e6),
-        measured(1e6, 0.3, 39.4e6, 0.456e6, 110e6),
+        measured(1e6, 0.05, 70.3e6, 0.190e6, 79.6e6),
+        measured(1e6, 0.3, 40.4e6, 0.456e6, 110e6),
     ],
 ];
 
