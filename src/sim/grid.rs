@@ -658,11 +658,7 @@ impl StripGrid {
                 let own = &own_entries[pos + 1..];
                 offer_window::<OWN_WINDOW>(own, a, right, &within, sink);
                 // North strip: the disks within reach on either side.
-                while north_first < north_entries.len()
-                    && north_entries[north_first].x <= a.x - reach
-                {
-                    north_first += 1;
-                }
+                north_first = first_in_window(north_entries, north_first, a.x - reach);
                 let left = |b: &Entry| b.x < a.x + reach;
                 let north = &north_entries[north_first..];
                 offer_window::<NORTH_WINDOW>(north, a, left, &within, sink);
@@ -701,6 +697,31 @@ impl StripGrid {
             }
         }
     }
+}
+
+/// Entries a window's left end passes tested at once ([`first_in_window`]).
+const WINDOW_STEP: usize = 4;
+
+/// The first of `entries` (sorted by x) from `from` on whose x is above `left_end`, for
+/// a window that only moves right. The scan's next disk moves the window's left end by
+/// about one entry: [`WINDOW_STEP`] entries are tested at once, without a branch per
+/// entry (a loop exit after a varying count is mispredicted), and a loop continues only
+/// when all of them are passed.
+#[inline(always)]
+fn first_in_window(entries: &[Entry], from: usize, left_end: f32) -> usize {
+    let mut first = from;
+    if let Some(next) = entries.get(first..first + WINDOW_STEP) {
+        // Sorted: the entries passed come first, so their count is the step.
+        let passed: usize = next.iter().map(|b| usize::from(b.x <= left_end)).sum();
+        first += passed;
+        if passed < WINDOW_STEP {
+            return first;
+        }
+    }
+    while first < entries.len() && entries[first].x <= left_end {
+        first += 1;
+    }
+    first
 }
 
 /// Candidates of a disk's own strip tested without a loop exit ([`StripGrid::scan`]).
