@@ -185,6 +185,8 @@ struct RankState {
     particles: Particles,
     /// How many of `particles` are the rank's own (the rest are this step's ghosts).
     n_own: usize,
+    /// Disks on all ranks together: the scene's, which migration keeps.
+    n_disks: usize,
     /// Strips tall enough for the neighbour list's skin.
     grid: StripGrid,
     /// The skin and the own disks' positions at the last build of the list.
@@ -211,26 +213,24 @@ struct RankState {
 }
 
 /// A rank's report on the disks that escaped its list, as gathered on every rank: a
-/// header (the largest displacement, the escapee count, the own disk count, as f64),
-/// then the escapees other ranks must query, packed ([`Particles::pack`]).
+/// header (the largest displacement and the escapee count, as f64), then the escapees
+/// other ranks must query, packed ([`Particles::pack`]).
 struct EscapeeReport {
     moved_sq: f64,
     n_escapees: usize,
-    n_disks: usize,
 }
 
 impl EscapeeReport {
-    const HEADER_LEN: usize = 3;
+    const HEADER_LEN: usize = 2;
 
     fn header(&self) -> Vec<f64> {
-        vec![self.moved_sq, self.n_escapees as f64, self.n_disks as f64]
+        vec![self.moved_sq, self.n_escapees as f64]
     }
 
     fn read(report: &[f64]) -> EscapeeReport {
         EscapeeReport {
             moved_sq: report[0],
             n_escapees: report[1] as usize,
-            n_disks: report[2] as usize,
         }
     }
 
@@ -281,6 +281,7 @@ impl RankState {
             slab,
             owner,
             n_own: particles.len(),
+            n_disks: all.len(),
             particles,
             grid,
             skin,
@@ -319,19 +320,16 @@ impl RankState {
         // rank whose strips they may reach.
         let report = timed(&mut stages.broad_phase, || self.escapee_report());
         let reports = timed(&mut stages.communication, || comm.all_gather(&report));
-        let (moved_sq, n_escapees, n_disks) =
-            reports
-                .iter()
-                .fold((0.0, 0, 0), |(moved_sq, n_escapees, n_disks), report| {
-                    let header = EscapeeReport::read(report);
-                    (
-                        larger(moved_sq, header.moved_sq),
-                        n_escapees + header.n_escapees,
-                        n_disks + header.n_disks,
-                    )
-                });
+        let (moved_sq, n_escapees) =
+            (reports.iter()).fold((0.0, 0), |(moved_sq, n_escapees), report| {
+                let header = EscapeeReport::read(report);
+                (
+                    larger(moved_sq, header.moved_sq),
+                    n_escapees + header.n_escapees,
+                )
+            });
         let stale = self.skin.is_exceeded(moved_sq);
-        let rebuild = stale && !self.skin.may_patch(n_escapees, n_disks, moved_sq);
+        let rebuild = stale && !self.skin.may_patch(n_escapees, self.n_disks, moved_sq);
         if rebuild {
             let emigrants = timed(&mut stages.broad_phase, || self.refresh(comm.size()));
             let immigrants = timed(&mut stages.communication, || comm.exchange(&emigrants));
@@ -377,7 +375,6 @@ impl RankState {
         let mut report = EscapeeReport {
             moved_sq,
             n_escapees: self.escapees.len(),
-            n_disks: n_own,
         }
         .header();
         // Queries serve escapees only while none moved further than this.

@@ -4,7 +4,7 @@
 //! arithmetic ([`Domain::separation_in`]), so the two broad phases give bit-identical
 //! runs. The order in which pairs are found is not canonical; the stepper sorts them.
 
-use std::ops::Range;
+use std::ops::{Range, RangeInclusive};
 
 use super::particles::Particles;
 use super::scene::{Boundary, Domain, minimum_image};
@@ -230,21 +230,32 @@ impl StripGrid {
     /// `radius` at height `y`, when disks moved up to `moved`, may read strips this grid
     /// does not own.
     pub fn query_leaves_owned(&self, y: f64, radius: f64, moved: f64, domain: &Domain) -> bool {
-        if self.n_owned == self.layout.n_strips {
-            return false;
-        }
         let reach = self.query_reach(radius, moved);
-        let inv_height = self.layout.inv_strip_height;
-        let lowest = ((y - reach) * inv_height).floor();
-        let highest = ((y + reach) * inv_height).floor();
-        // At walls the edge strips hold the disks beyond them: clamped as the query does.
-        let last = (self.layout.n_strips - 1) as f64;
-        let (lowest, highest) = match domain.boundary {
-            Boundary::Periodic => (lowest, highest),
-            Boundary::Walls => (lowest.clamp(0.0, last), highest.clamp(0.0, last)),
+        let strips = match domain.boundary {
+            Boundary::Walls => self.query_strips::<false>(y, reach),
+            Boundary::Periodic => self.query_strips::<true>(y, reach),
         };
-        let owned = self.owned();
-        !(lowest >= owned.start as f64 && highest < owned.end as f64)
+        let n_strips = self.layout.n_strips as i64;
+        strips.into_iter().any(|strip| {
+            !self
+                .owned()
+                .contains(&(strip.rem_euclid(n_strips) as usize))
+        })
+    }
+
+    /// The strips a query reaching `reach` around height `y` reads, as unwrapped global
+    /// indices: in a periodic box every strip once, even when the window wraps all the
+    /// way round; at walls the edge strips hold the disks beyond them.
+    fn query_strips<const PERIODIC: bool>(&self, y: f64, reach: f64) -> RangeInclusive<i64> {
+        let n_strips = self.layout.n_strips as i64;
+        let inv_height = self.layout.inv_strip_height;
+        let lowest = ((y - reach) * inv_height).floor() as i64;
+        let highest = ((y + reach) * inv_height).floor() as i64;
+        if PERIODIC {
+            lowest..=highest.min(lowest + n_strips - 1)
+        } else {
+            lowest.clamp(0, n_strips - 1)..=highest.clamp(0, n_strips - 1)
+        }
     }
 
     /// How far from a disk of radius `radius` a query looks, when disks moved up to
@@ -471,19 +482,6 @@ impl StripGrid {
             let a = mover as usize;
             let (xa, ya) = (x[a], y[a]);
             let reach = self.query_reach(radius[a], moved);
-            let inv_height = self.layout.inv_strip_height;
-            let lowest = ((ya - reach) * inv_height).floor() as i64;
-            let highest = ((ya + reach) * inv_height).floor() as i64;
-            // Strips as unwrapped indices: in a periodic box every strip once, even when
-            // the window wraps all the way round; at walls the edge strips hold the rest.
-            let (first_strip, last_strip) = if PERIODIC {
-                (lowest, highest.min(lowest + n_strips - 1))
-            } else {
-                (
-                    lowest.clamp(0, n_strips - 1),
-                    highest.clamp(0, n_strips - 1),
-                )
-            };
             // x windows of build positions: one, or two where a periodic window wraps.
             let whole = (f64::NEG_INFINITY, f64::INFINITY);
             let windows = match (PERIODIC, reach < 0.5 * width) {
@@ -500,7 +498,7 @@ impl StripGrid {
             // The entries' x is rounded to f32: widen the windows by the rounding of any x
             // inside them (at most |xa| + reach, or the box's width when periodic).
             let slack = rounding_slack(xa.abs().max(width) + reach);
-            for strip in first_strip..=last_strip {
+            for strip in self.query_strips::<PERIODIC>(ya, reach) {
                 let Some(local) = self.local_strip(strip.rem_euclid(n_strips) as usize) else {
                     continue;
                 };
