@@ -35,7 +35,7 @@ use crate::sim::observe::observe;
 use crate::sim::particles::PACKED_LEN;
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::{ContactSchedule, DiskSet};
-use crate::sim::step::{FIRST_BUILDS_SINCE_REORDER, REORDER_INTERVAL, advance_disks};
+use crate::sim::step::{ReorderSchedule, advance_disks};
 use crate::sim::{Boundary, Particles, StepCounters};
 
 /// Runs `spec` on every rank of `comm` (all ranks call this together). Rank 0 returns
@@ -200,7 +200,8 @@ struct RankState {
     escapees: Vec<u32>,
     /// Those of them reported to the other ranks, whose strips their queries may reach.
     sent: DiskSet,
-    builds_since_reorder: u32,
+    /// When the own disks are next stored in grid order: the scene's schedule.
+    reorder: ReorderSchedule,
     movers: Vec<Mover>,
     contacts: Vec<Contact>,
     shared: Vec<Contact>,
@@ -286,7 +287,7 @@ impl RankState {
             grid,
             skin,
             list: PairList::default(),
-            builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
+            reorder: ReorderSchedule::for_scene(all.len()),
             movers: Vec::new(),
             contacts: Vec::new(),
             shared: Vec::new(),
@@ -417,8 +418,8 @@ impl RankState {
         outgoing
     }
 
-    /// Frees the slots of the disks that left and takes in the disks that arrived; every
-    /// [`REORDER_INTERVAL`] builds, re-stores the disks in grid order.
+    /// Frees the slots of the disks that left and takes in the disks that arrived; when
+    /// the [`ReorderSchedule`] says so, re-stores the disks in grid order.
     fn migrate(&mut self, n_ranks: usize, immigrants: &[Vec<f64>]) {
         debug_assert_eq!(immigrants.len(), n_ranks);
         let staying = self.slab.clone();
@@ -448,13 +449,11 @@ impl RankState {
         sort_movers(&mut arrived);
         receive_band(self.grid.owned_strips_mut(), self.slab.start, &[&arrived]);
 
-        self.builds_since_reorder += 1;
-        if self.builds_since_reorder >= REORDER_INTERVAL {
+        if self.reorder.count_build() {
             // The list is rebuilt next: freed first, as the serial stepper does.
             self.list = PairList::default();
             self.particles.reorder(&self.grid.sorted_indices());
             self.grid.storage_now_sorted();
-            self.builds_since_reorder = 0;
         }
     }
 

@@ -32,7 +32,7 @@ use crate::sim::observe::observe;
 use crate::sim::prefetch::prefetch;
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::{ContactSchedule, DiskSet};
-use crate::sim::step::{FIRST_BUILDS_SINCE_REORDER, REORDER_INTERVAL, advance_disks};
+use crate::sim::step::{ReorderSchedule, advance_disks};
 use crate::sim::{
     Broadphase, DiskSlices, Domain, Particles, PerDisk, Physics, StepCounters, StepParams,
 };
@@ -123,7 +123,7 @@ pub struct ThreadedStepper {
     in_first_strips: DiskSet,
     /// Per disk: in a pair an escapee's query found this step (all false between steps).
     touched: Vec<bool>,
-    builds_since_reorder: u32,
+    reorder: ReorderSchedule,
     /// Per band: disks that left its strips in the last refresh.
     movers: Vec<Vec<Mover>>,
     /// Per band: the pairs its strips found, then those of chains it resolves alone.
@@ -157,7 +157,7 @@ impl ThreadedStepper {
             lists: Vec::new(),
             in_first_strips: DiskSet::default(),
             touched: Vec::new(),
-            builds_since_reorder: FIRST_BUILDS_SINCE_REORDER,
+            reorder: ReorderSchedule::for_scene(particles.len()),
             movers: Vec::new(),
             contacts: Vec::new(),
             handed_over: Vec::new(),
@@ -346,7 +346,7 @@ impl ThreadedStepper {
         self.skin.record(particles);
     }
 
-    /// The grid build, band by band, and every [`REORDER_INTERVAL`] builds the disks
+    /// The grid build, band by band, and when the [`ReorderSchedule`] says so the disks
     /// re-stored in grid order (in parallel), exactly when the serial stepper does it.
     /// Returns the bands it used, cut by the disk counts before the refresh: the pair
     /// scan uses the same bands. The grid was first built for these disks with the
@@ -376,8 +376,7 @@ impl ThreadedStepper {
         slices
             .par_iter_mut()
             .for_each(|(first, band)| receive_band(band, *first, &movers));
-        self.builds_since_reorder += 1;
-        if self.builds_since_reorder >= REORDER_INTERVAL {
+        if self.reorder.count_build() {
             // The lists are rebuilt next: freed first, as the serial stepper does.
             self.lists.clear();
             let strips = self.grid.owned_strips_mut();
@@ -399,7 +398,6 @@ impl ThreadedStepper {
                 .par_iter_mut()
                 .zip(first_slots)
                 .for_each(|(strip, first_slot)| number_slots(strip, first_slot));
-            self.builds_since_reorder = 0;
         }
         bands
     }
