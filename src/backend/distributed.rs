@@ -451,7 +451,7 @@ impl RankState {
 
         if self.reorder.count_build() {
             // The list is rebuilt next: freed first, as the serial stepper does.
-            self.list = PairList::default();
+            self.list.release();
             self.particles.reorder(&self.grid.sorted_indices());
             self.grid.storage_now_sorted();
         }

@@ -378,7 +378,7 @@ impl ThreadedStepper {
             .for_each(|(first, band)| receive_band(band, *first, &movers));
         if self.reorder.count_build() {
             // The lists are rebuilt next: freed first, as the serial stepper does.
-            self.lists.clear();
+            self.lists.iter_mut().for_each(PairList::release);
             let strips = self.grid.owned_strips_mut();
             let order: Vec<u32> = strips
                 .par_iter()

@@ -230,7 +230,7 @@ impl Stepper {
             // Results do not change: pair order and sums go by id, not storage. The
             // list, rebuilt below, is freed first: the re-storing's new arrays take its
             // memory instead of adding to the peak.
-            self.neighbours = PairList::default();
+            self.neighbours.release();
             particles.reorder(&self.grid.sorted_indices());
             self.grid.storage_now_sorted();
         }
