@@ -53,22 +53,23 @@ pub struct Measured {
 /// rates from the last, the first to time them with the state cold in the caches).
 /// The step method's rates are the median of three later runs of
 /// `cargo bench --features mpi --bench kernels -- '^step/'` on the same machine, idle
-/// (2026-11-25, 02:04–02:08 UTC; the runs differed by up to 23% at 10⁶ and 0.05, 13%
-/// elsewhere), with large allocations on huge pages (docs/performance.md, 02:10 UTC);
-/// they moved by +1% to +6% from the rates of 2026-11-24, 23:23 UTC.
+/// (2026-11-25, 05:49–06:01 UTC; the runs differed by up to 14% at 10⁵ and 0.05, 12% at
+/// 10⁶ and 0.3, 4% elsewhere), with large scenes re-stored every 4 builds
+/// (docs/performance.md, 05:50 UTC); they moved by +5% to +18% from the rates of
+/// 02:04–02:08 UTC, at 10⁴ and 10⁵ (code unchanged there) by the machine's drift.
 /// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [
-        measured(1e4, 0.05, 96.2e6, 0.947e6, 432e6),
-        measured(1e4, 0.3, 54.5e6, 1.49e6, 457e6),
+        measured(1e4, 0.05, 100.8e6, 0.947e6, 432e6),
+        measured(1e4, 0.3, 57.0e6, 1.49e6, 457e6),
     ],
     [
-        measured(1e5, 0.05, 89.0e6, 0.235e6, 68.0e6),
-        measured(1e5, 0.3, 52.4e6, 0.612e6, 90.6e6),
+        measured(1e5, 0.05, 99.6e6, 0.235e6, 68.0e6),
+        measured(1e5, 0.3, 56.3e6, 0.612e6, 90.6e6),
     ],
     [
-        measured(1e6, 0.05, 70.3e6, 0.190e6, 79.6e6),
-        measured(1e6, 0.3, 40.4e6, 0.456e6, 110e6),
+        measured(1e6, 0.05, 83.2e6, 0.190e6, 79.6e6),
+        measured(1e6, 0.3, 44.9e6, 0.456e6, 110e6),
     ],
 ];
 
