@@ -35,8 +35,8 @@ const LARGE_SCENE_DISKS: usize = 1 << 18;
 
 /// When a stepper re-stores the disks in grid order: at the first build (a sort from
 /// scratch: a new scene is stored in placement order, which is random in space), then
-/// every few builds, fewer in scenes too large for the caches. Storage order never
-/// changes a result, so each backend may keep its own; they share this one.
+/// every 16 builds, or every 4 in scenes too large for the caches. Storage order never
+/// changes a result, so each backend could keep its own; they share this one.
 #[derive(Clone, Copy, Debug)]
 pub struct ReorderSchedule {
     interval: u32,
