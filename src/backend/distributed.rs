@@ -452,8 +452,7 @@ impl RankState {
         if self.reorder.count_build() {
             // The list is rebuilt next: freed first, as the serial stepper does.
             self.list.release();
-            self.particles.reorder(&self.grid.sorted_indices());
-            self.grid.storage_now_sorted();
+            self.grid.store_in_grid_order(&mut self.particles);
         }
     }
 

@@ -53,7 +53,7 @@ pub struct Measured {
 /// rates from the last, the first to time them with the state cold in the caches).
 /// The step method's rates are the median of three later runs of
 /// `cargo bench --features mpi --bench kernels -- '^step/'` on the same machine, idle
-/// (2026-11-25, 05:49–06:01 UTC; the runs differed by up to 14% at 10⁵ and 0.05, 12% at
+/// (2026-11-25, 05:49–06:01 UTC; the runs differed by up to 16% at 10⁵ and 0.05, 13% at
 /// 10⁶ and 0.3, 4% elsewhere), with large scenes re-stored every 4 builds
 /// (docs/performance.md, 05:50 UTC); they moved by +5% to +18% from the rates of
 /// 02:04–02:08 UTC, at 10⁴ and 10⁵ (code unchanged there) by the machine's drift.

@@ -235,12 +235,10 @@ impl StripGrid {
             Boundary::Walls => self.query_strips::<false>(y, reach),
             Boundary::Periodic => self.query_strips::<true>(y, reach),
         };
-        let n_strips = self.layout.n_strips as i64;
-        strips.into_iter().any(|strip| {
-            !self
-                .owned()
-                .contains(&(strip.rem_euclid(n_strips) as usize))
-        })
+        let (n_strips, owned) = (self.layout.n_strips as i64, self.owned());
+        strips
+            .into_iter()
+            .any(|strip| !owned.contains(&(strip.rem_euclid(n_strips) as usize)))
     }
 
     /// The strips a query reaching `reach` around height `y` reads, as unwrapped global
@@ -279,19 +277,16 @@ impl StripGrid {
         self.len() == 0
     }
 
-    /// Storage indices in sorted order (strip, then x) over the owned strips, as of the
-    /// last build.
-    pub fn sorted_indices(&self) -> Vec<u32> {
-        self.strips[..self.n_owned]
+    /// Re-stores `particles` (the disks of the owned strips, as of the last build) in
+    /// grid order (strip, then x), and points the entries to their new slots. Results do
+    /// not change: pair order and sums go by id, not storage.
+    pub fn store_in_grid_order(&mut self, particles: &mut Particles) {
+        let order: Vec<u32> = self.strips[..self.n_owned]
             .iter()
             .flatten()
             .map(|entry| entry.idx)
-            .collect()
-    }
-
-    /// Tells the grid that the caller stored the disks in [`StripGrid::sorted_indices`]
-    /// order, so slot and storage index now coincide.
-    pub fn storage_now_sorted(&mut self) {
+            .collect();
+        particles.reorder(&order);
         let mut first_slot = 0;
         for strip in &mut self.strips[..self.n_owned] {
             number_slots(strip, first_slot);
@@ -918,7 +913,7 @@ pub fn receive_band(band: &mut [Vec<Entry>], first: usize, movers: &[&[Mover]]) 
 }
 
 /// Points the entries of one strip to consecutive storage slots from `first_slot`: the
-/// strip's part of [`StripGrid::storage_now_sorted`].
+/// strip's part of [`StripGrid::store_in_grid_order`].
 pub fn number_slots(strip: &mut [Entry], first_slot: usize) {
     for (offset, entry) in strip.iter_mut().enumerate() {
         entry.idx = (first_slot + offset) as u32;

@@ -226,13 +226,11 @@ impl Stepper {
     fn rebuild_list(&mut self, particles: &mut Particles) {
         self.grid.build(particles);
         if self.reorder.count_build() {
-            // Storing disks in grid order keeps the next builds' reads sequential.
-            // Results do not change: pair order and sums go by id, not storage. The
+            // Storing disks in grid order keeps the next builds' reads sequential. The
             // list, rebuilt below, is freed first: the re-storing's new arrays take its
             // memory instead of adding to the peak.
             self.neighbours.release();
-            particles.reorder(&self.grid.sorted_indices());
-            self.grid.storage_now_sorted();
+            self.grid.store_in_grid_order(particles);
         }
         let strips = self.grid.owned();
         self.neighbours
