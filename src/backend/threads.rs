@@ -27,8 +27,9 @@ use crate::sim::grid::{
     Contact, Entry, Mover, StripGrid, find_contacts_all_pairs_from, number_slots, receive_band,
     refresh_band,
 };
-use crate::sim::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin};
+use crate::sim::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin, round_positions};
 use crate::sim::observe::observe;
+use crate::sim::particles::gather;
 use crate::sim::prefetch::prefetch;
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::{ContactSchedule, DiskSet};
@@ -343,7 +344,16 @@ impl ThreadedStepper {
             .par_iter_mut()
             .zip(bands.par_iter())
             .for_each(|(list, band)| list.rebuild(grid, band.clone(), particles_now, domain, skin));
-        self.skin.record(particles);
+        self.skin.record_with(particles, |x, y, x_built, y_built| {
+            let pieces = x.par_chunks(MIN_CHUNK).zip(y.par_chunks(MIN_CHUNK));
+            let built = x_built
+                .par_chunks_mut(MIN_CHUNK)
+                .zip(y_built.par_chunks_mut(MIN_CHUNK));
+            pieces
+                .zip(built)
+                .map(|((x, y), (x_built, y_built))| round_positions(x, y, x_built, y_built))
+                .reduce(|| 0.0, f64::max)
+        });
     }
 
     /// The grid build, band by band, and when the [`ReorderSchedule`] says so the disks
@@ -380,20 +390,30 @@ impl ThreadedStepper {
             // The lists are rebuilt next: freed first, as the serial stepper does.
             self.lists.iter_mut().for_each(PairList::release);
             let strips = self.grid.owned_strips_mut();
-            let order: Vec<u32> = strips
-                .par_iter()
-                .flat_map_iter(|strip| strip.iter().map(Entry::idx))
-                .collect();
-            particles.replace_arrays(
-                |values| order.par_iter().map(|&idx| values[idx as usize]).collect(),
-                |ids| order.par_iter().map(|&idx| ids[idx as usize]).collect(),
-            );
             let mut first_slots = Vec::with_capacity(strips.len());
             let mut slot = 0;
             for strip in strips.iter() {
                 first_slots.push(slot);
                 slot += strip.len();
             }
+            // The new order, strip by strip in parallel into its place.
+            let mut order = vec![0; particles.len()];
+            let mut rest = &mut order[..];
+            let mut pieces = Vec::with_capacity(strips.len());
+            for strip in strips.iter() {
+                let (piece, after) = rest.split_at_mut(strip.len());
+                pieces.push(piece);
+                rest = after;
+            }
+            strips.par_iter().zip(pieces).for_each(|(strip, piece)| {
+                for (slot, entry) in piece.iter_mut().zip(strip) {
+                    *slot = entry.idx();
+                }
+            });
+            particles.gather_arrays(
+                |values, into| gather_in_parallel(values, &order, into),
+                |ids, into| gather_in_parallel(ids, &order, into),
+            );
             strips
                 .par_iter_mut()
                 .zip(first_slots)
@@ -480,6 +500,13 @@ impl ThreadedStepper {
             |_| {},
         );
     }
+}
+
+/// [`gather`] in parallel chunks of [`MIN_CHUNK`].
+fn gather_in_parallel<T: Copy + Send + Sync>(values: &[T], order: &[u32], into: &mut [T]) {
+    into.par_chunks_mut(MIN_CHUNK)
+        .zip(order.par_chunks(MIN_CHUNK))
+        .for_each(|(into, order)| gather(values, order, into));
 }
 
 /// Cuts the owned strips (global index 0 first) into the given bands, each with the

@@ -152,11 +152,11 @@ impl PerDisk {
         }
     }
 
-    /// Replaces one-per-disk values with what `remake` makes of them (a shared value
-    /// stays as it is: `remake` reorders).
-    fn remake(&mut self, remake: impl FnOnce(&[f64]) -> Vec<f64>) {
-        if let PerDisk::Each(values) = self {
-            *values = remake(values);
+    /// The values held one per disk, if they are (a shared value has none to reorder).
+    fn values_mut(&mut self) -> Option<&mut Vec<f64>> {
+        match self {
+            PerDisk::Shared { .. } => None,
+            PerDisk::Each(values) => Some(values),
         }
     }
 
@@ -250,6 +250,14 @@ impl<'a> PerDiskSlice<'a> {
                 PerDiskSlice::Each(values) => PerDiskSlice::Each(&values[start..end]),
             }
         })
+    }
+}
+
+/// Fills `into` with the `values` at the indices `order` lists, in order (as many).
+pub fn gather<T: Copy>(values: &[T], order: &[u32], into: &mut [T]) {
+    debug_assert_eq!(order.len(), into.len());
+    for (slot, &idx) in into.iter_mut().zip(order) {
+        *slot = values[idx as usize];
     }
 }
 
@@ -410,26 +418,33 @@ impl Particles {
     /// Stores the disks in a new order: `new_order` lists old storage indices, each once.
     pub fn reorder(&mut self, new_order: &[u32]) {
         debug_assert_eq!(new_order.len(), self.len());
-        self.replace_arrays(
-            |values| new_order.iter().map(|&idx| values[idx as usize]).collect(),
-            |ids| new_order.iter().map(|&idx| ids[idx as usize]).collect(),
+        self.gather_arrays(
+            |values, into| gather(values, new_order, into),
+            |ids, into| gather(ids, new_order, into),
         );
     }
 
-    /// Replaces every array with what `floats` (for the f64 arrays, and the properties
-    /// held one per disk) or `ids` makes of it: a reordering.
-    pub fn replace_arrays(
+    /// Replaces every array with a new one, as long, that `floats` (for the f64 arrays,
+    /// and the properties held one per disk) or `ids` fills from it: a reordering. The
+    /// f64 arrays pass one spare array from one to the next (each filled into it, then
+    /// swapped with it): a re-storing takes fresh memory for one array, not for each.
+    pub fn gather_arrays(
         &mut self,
-        mut floats: impl FnMut(&[f64]) -> Vec<f64>,
-        ids: impl FnOnce(&[u32]) -> Vec<u32>,
+        mut floats: impl FnMut(&[f64], &mut [f64]),
+        ids: impl FnOnce(&[u32], &mut [u32]),
     ) {
-        self.id = ids(&self.id);
-        for values in self.motion_arrays_mut() {
-            *values = floats(values);
-        }
-        for values in self.properties_mut() {
-            values.remake(&mut floats);
-        }
+        let n = self.len();
+        let mut new_ids = vec![0; n];
+        ids(&self.id, &mut new_ids);
+        self.id = new_ids;
+        let mut spare = vec![0.0; n];
+        let mut replace = |values: &mut Vec<f64>| {
+            floats(values, &mut spare);
+            std::mem::swap(values, &mut spare);
+        };
+        self.motion_arrays_mut().into_iter().for_each(&mut replace);
+        let properties = self.properties_mut().into_iter();
+        properties.filter_map(PerDisk::values_mut).for_each(replace);
     }
 
     /// The positions and velocities in packing order: x, y, vx, vy. With `id` and
