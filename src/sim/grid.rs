@@ -300,10 +300,17 @@ impl StripGrid {
     }
 
     /// Sorts the disks stored at `indices` (all in owned strips) into the grid from
-    /// scratch, dropping whatever it held.
-    pub fn fill(&mut self, particles: &Particles, indices: impl Iterator<Item = usize>) {
-        for strip in &mut self.strips {
-            strip.clear();
+    /// scratch, dropping whatever it held. Each strip gets room for the disks counted
+    /// in it and a little more ([`with_room`]): filled by pushing, a strip's room doubled
+    /// whenever it ran out, and a strip of 1,100–2,000 disks ended with room for 2,048
+    /// (the grid of 10⁶ disks took 19.9 bytes per disk for 12 of entries).
+    pub fn fill(&mut self, particles: &Particles, indices: Range<usize>) {
+        let mut counts = vec![0_usize; self.strips.len()];
+        for idx in indices.clone() {
+            counts[self.layout.strip_of(particles.y[idx]) - self.first] += 1;
+        }
+        for (strip, count) in self.strips.iter_mut().zip(counts) {
+            *strip = Vec::with_capacity(with_room(count));
         }
         for idx in indices {
             let mover = self.mover(particles, idx);
@@ -920,10 +927,23 @@ pub fn number_slots(strip: &mut [Entry], first_slot: usize) {
     }
 }
 
+/// A strip's spare room: one entry for every this many it holds. Strips change by a
+/// few disks per build (one of the grid of 10⁶ disks at packing 0.3 holds about 1,200).
+const STRIP_SPARE_SHARE: usize = 32;
+
+/// The room for a strip of `len` disks: them and [`STRIP_SPARE_SHARE`]'s spare.
+fn with_room(len: usize) -> usize {
+    len + len / STRIP_SPARE_SHARE + 1
+}
+
 /// Merges `incoming` (sorted by x) into `strip` (sorted by x), from the back.
 fn merge_sorted(strip: &mut Vec<Entry>, incoming: &[Mover]) {
     let mut read = strip.len();
-    strip.resize(read + incoming.len(), Entry::default());
+    let len = read + incoming.len();
+    if len > strip.capacity() {
+        strip.reserve_exact(with_room(len) - read);
+    }
+    strip.resize(len, Entry::default());
     let mut write = strip.len();
     for new in incoming.iter().rev().map(|mover| &mover.entry) {
         while read > 0 && new.x < strip[read - 1].x {
