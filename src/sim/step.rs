@@ -25,8 +25,9 @@ const SMALL_SCENE_REORDER_INTERVAL: u32 = 16;
 /// were stored in, the lists' pairs read positions further apart in memory, and past the
 /// caches each such read waits on memory. Re-storing every 4 builds instead of 16
 /// measured 1.03–1.12× at 6·10⁵ and 10⁶ disks, 1.02–1.06× at 10⁷ (100 steps), 0.94–1.05×
-/// at 10⁵ (`docs/performance.md`).
-const LARGE_SCENE_REORDER_INTERVAL: u32 = 4;
+/// at 10⁵; every 2 instead of 4, 1.00–1.04× at 6·10⁵ and 10⁶, 0.99–1.00× at 10⁷
+/// (`docs/performance.md`).
+const LARGE_SCENE_REORDER_INTERVAL: u32 = 2;
 
 /// Scenes from this many disks on are re-stored every [`LARGE_SCENE_REORDER_INTERVAL`]
 /// builds: about where positions and lists (some 35 bytes per disk) outgrow a server's
@@ -35,7 +36,7 @@ const LARGE_SCENE_DISKS: usize = 1 << 18;
 
 /// When a stepper re-stores the disks in grid order: at the first build (a sort from
 /// scratch: a new scene is stored in placement order, which is random in space), then
-/// every 16 builds, or every 4 in scenes too large for the caches. Storage order never
+/// every 16 builds, or every 2 in scenes too large for the caches. Storage order never
 /// changes a result, so each backend could keep its own; they share this one.
 #[derive(Clone, Copy, Debug)]
 pub struct ReorderSchedule {
@@ -473,11 +474,11 @@ mod tests {
     }
 
     /// The first build re-stores the disks (they are in placement order); then a small
-    /// scene waits 16 builds between re-storings, a large one 4.
+    /// scene waits 16 builds between re-storings, a large one 2.
     #[test]
     fn disks_are_restored_at_the_first_build_then_more_often_in_large_scenes() {
         assert_eq!(restoring_builds(1000, 40), [1, 17, 33]);
         assert_eq!(restoring_builds(LARGE_SCENE_DISKS - 1, 40), [1, 17, 33]);
-        assert_eq!(restoring_builds(LARGE_SCENE_DISKS, 14), [1, 5, 9, 13]);
+        assert_eq!(restoring_builds(LARGE_SCENE_DISKS, 8), [1, 3, 5, 7]);
     }
 }
