@@ -24,8 +24,7 @@ use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
 use crate::sim::collision::DiskState;
 use crate::sim::grid::{
-    Contact, Entry, Mover, StripGrid, find_contacts_all_pairs_from, number_slots, receive_band,
-    refresh_band,
+    Contact, Entry, Mover, StripGrid, find_contacts_all_pairs_from, receive_band, refresh_band,
 };
 use crate::sim::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin, round_positions};
 use crate::sim::observe::observe;
@@ -389,35 +388,11 @@ impl ThreadedStepper {
         if self.reorder.count_build() {
             // The lists are rebuilt next: freed first, as the serial stepper does.
             self.lists.iter_mut().for_each(PairList::release);
-            let strips = self.grid.owned_strips_mut();
-            let mut first_slots = Vec::with_capacity(strips.len());
-            let mut slot = 0;
-            for strip in strips.iter() {
-                first_slots.push(slot);
-                slot += strip.len();
-            }
-            // The new order, strip by strip in parallel into its place.
-            let mut order = vec![0; particles.len()];
-            let mut rest = &mut order[..];
-            let mut pieces = Vec::with_capacity(strips.len());
-            for strip in strips.iter() {
-                let (piece, after) = rest.split_at_mut(strip.len());
-                pieces.push(piece);
-                rest = after;
-            }
-            strips.par_iter().zip(pieces).for_each(|(strip, piece)| {
-                for (slot, entry) in piece.iter_mut().zip(strip) {
-                    *slot = entry.idx();
-                }
-            });
-            particles.gather_arrays(
-                |values, into| gather_in_parallel(values, &order, into),
-                |ids, into| gather_in_parallel(ids, &order, into),
+            self.grid.store_in_grid_order_with(
+                particles,
+                gather_in_parallel::<f64>,
+                gather_in_parallel::<u32>,
             );
-            strips
-                .par_iter_mut()
-                .zip(first_slots)
-                .for_each(|(strip, first_slot)| number_slots(strip, first_slot));
         }
         bands
     }

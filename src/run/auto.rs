@@ -57,6 +57,8 @@ pub struct Measured {
 /// 10⁶ and 0.3, 4% elsewhere), with large scenes re-stored every 4 builds
 /// (docs/performance.md, 05:50 UTC); they moved by +5% to +18% from the rates of
 /// 02:04–02:08 UTC, at 10⁴ and 10⁵ (code unchanged there) by the machine's drift.
+/// Re-storing every 2 builds since moved the serial step at 10⁶ by 1.00–1.04×
+/// (docs/performance.md, 08:20 UTC section), inside the runs' spread: not re-measured.
 /// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [

@@ -6,7 +6,7 @@
 
 use std::ops::{Range, RangeInclusive};
 
-use super::particles::Particles;
+use super::particles::{Particles, gather};
 use super::scene::{Boundary, Domain, minimum_image};
 
 /// An overlapping pair. `a` is the storage index of the disk with the lower id.
@@ -281,12 +281,26 @@ impl StripGrid {
     /// grid order (strip, then x), and points the entries to their new slots. Results do
     /// not change: pair order and sums go by id, not storage.
     pub fn store_in_grid_order(&mut self, particles: &mut Particles) {
-        let order: Vec<u32> = self.strips[..self.n_owned]
-            .iter()
-            .flatten()
-            .map(|entry| entry.idx)
-            .collect();
-        particles.reorder(&order);
+        self.store_in_grid_order_with(particles, gather, gather);
+    }
+
+    /// [`StripGrid::store_in_grid_order`], each array gathered into the new order by
+    /// `floats` or `ids` (as [`gather`] does it, in one piece or in pieces: a parallel
+    /// backend's).
+    pub fn store_in_grid_order_with(
+        &mut self,
+        particles: &mut Particles,
+        mut floats: impl FnMut(&[f64], &[u32], &mut [f64]),
+        ids: impl FnOnce(&[u32], &[u32], &mut [u32]),
+    ) {
+        let mut order = Vec::with_capacity(self.len());
+        for strip in &self.strips[..self.n_owned] {
+            order.extend(strip.iter().map(|entry| entry.idx));
+        }
+        particles.gather_arrays(
+            |values, into| floats(values, &order, into),
+            |values, into| ids(values, &order, into),
+        );
         let mut first_slot = 0;
         for strip in &mut self.strips[..self.n_owned] {
             number_slots(strip, first_slot);
@@ -921,7 +935,7 @@ pub fn receive_band(band: &mut [Vec<Entry>], first: usize, movers: &[&[Mover]]) 
 
 /// Points the entries of one strip to consecutive storage slots from `first_slot`: the
 /// strip's part of [`StripGrid::store_in_grid_order`].
-pub fn number_slots(strip: &mut [Entry], first_slot: usize) {
+fn number_slots(strip: &mut [Entry], first_slot: usize) {
     for (offset, entry) in strip.iter_mut().enumerate() {
         entry.idx = (first_slot + offset) as u32;
     }

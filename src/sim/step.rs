@@ -25,7 +25,8 @@ const SMALL_SCENE_REORDER_INTERVAL: u32 = 16;
 /// were stored in, the lists' pairs read positions further apart in memory, and past the
 /// caches each such read waits on memory. Re-storing every 4 builds instead of 16
 /// measured 1.03–1.12× at 6·10⁵ and 10⁶ disks, 1.02–1.06× at 10⁷ (100 steps), 0.94–1.05×
-/// at 10⁵; every 2 instead of 4, 1.00–1.04× at 6·10⁵ and 10⁶, 0.99–1.00× at 10⁷
+/// at 10⁵; every 2 instead of 4, serial 1.00–1.04× at 6·10⁵ and 10⁶, 0.99–1.00× at 10⁷,
+/// rayon 1.02–1.08× over 100 steps and more but 0.91–0.93× over 50 at 10⁶ and 0.05
 /// (`docs/performance.md`).
 const LARGE_SCENE_REORDER_INTERVAL: u32 = 2;
 
