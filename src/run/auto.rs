@@ -53,25 +53,22 @@ pub struct Measured {
 /// rates from the last, the first to time them with the state cold in the caches).
 /// The step method's rates are the median of three later runs of
 /// `cargo bench --features mpi --bench kernels -- '^step/'` on the same machine, idle
-/// (2026-11-25, 05:49–06:01 UTC; the runs differed by up to 16% at 10⁵ and 0.05, 13% at
-/// 10⁶ and 0.3, 4% elsewhere), with large scenes re-stored every 4 builds
-/// (docs/performance.md, 05:50 UTC); they moved by +5% to +18% from the rates of
-/// 02:04–02:08 UTC, at 10⁴ and 10⁵ (code unchanged there) by the machine's drift.
-/// Re-storing every 2 builds since moved the serial step at 10⁶ by 1.00–1.04×
-/// (docs/performance.md, 08:20 UTC section), inside the runs' spread: not re-measured.
+/// (2026-11-25, 10:10–10:14 UTC, the code that re-stores large scenes every 2 builds;
+/// the runs differed by up to 4%): within −5% and −1% of the rates of 05:49–06:01 UTC
+/// (every 4 builds), inside those runs' spread of up to 16%.
 /// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [
-        measured(1e4, 0.05, 100.8e6, 0.947e6, 432e6),
-        measured(1e4, 0.3, 57.0e6, 1.49e6, 457e6),
+        measured(1e4, 0.05, 99.1e6, 0.947e6, 432e6),
+        measured(1e4, 0.3, 54.0e6, 1.49e6, 457e6),
     ],
     [
-        measured(1e5, 0.05, 99.6e6, 0.235e6, 68.0e6),
-        measured(1e5, 0.3, 56.3e6, 0.612e6, 90.6e6),
+        measured(1e5, 0.05, 95.8e6, 0.235e6, 68.0e6),
+        measured(1e5, 0.3, 54.2e6, 0.612e6, 90.6e6),
     ],
     [
-        measured(1e6, 0.05, 83.2e6, 0.190e6, 79.6e6),
-        measured(1e6, 0.3, 44.9e6, 0.456e6, 110e6),
+        measured(1e6, 0.05, 82.0e6, 0.190e6, 79.6e6),
+        measured(1e6, 0.3, 43.9e6, 0.456e6, 110e6),
     ],
 ];
 
