@@ -623,14 +623,16 @@ impl StripGrid {
         // In f32, as the entries: the slack covers the few roundings of this test too.
         let near_sq = rounded_up(near_limit * near_limit);
         let height = domain.height as f32;
+        let close = |dx: f32, dy: f32| dx * dx + dy * dy < near_sq;
         let near = |a: &Entry, b: &Entry| {
             let (dx, dy) = (b.x - a.x, b.y - a.y);
-            let (dx, dy) = match PERIODIC {
-                true => (minimum_image(dx, width), minimum_image(dy, height)),
-                false => (dx, dy),
-            };
-            dx * dx + dy * dy < near_sq
+            match PERIODIC {
+                true => close(minimum_image(dx, width), minimum_image(dy, height)),
+                false => close(dx, dy),
+            }
         };
+        // Where the minimum image cannot change the differences (below).
+        let near_plain = |a: &Entry, b: &Entry| close(b.x - a.x, b.y - a.y);
         // With a skin of 0, `r_a + r_b + skin` is the contact distance itself: adding 0.0
         // to a positive number is exact. With equal radii it is one number.
         let (x, y, radius) = (&particles.x[..], &particles.y[..], &particles.radius);
@@ -647,13 +649,18 @@ impl StripGrid {
             dx * dx + dy * dy < limit * limit
         };
         let superset = !S::EXACT && EQUAL_RADII;
-        let within = |a: &Entry, b: &Entry| {
-            if superset {
-                near(a, b)
-            } else {
-                near(a, b) && exact(a, b)
-            }
+        let decide = |near: bool, a: &Entry, b: &Entry| {
+            if superset { near } else { near && exact(a, b) }
         };
+        let imaged = |a: &Entry, b: &Entry| decide(near(a, b), a, b);
+        let plain = |a: &Entry, b: &Entry| decide(near_plain(a, b), a, b);
+        // Inside a disk's own window, and its north window unless the strip is the box's
+        // last (whose north is the first, a box height away), the minimum image leaves
+        // every difference as it is when the box is at least 5 strips tall (|dy| is at
+        // most two strips, under half the height) and the reach is at most half its
+        // width (|dx| is under the reach): the same test, bit for bit, without the image.
+        // A candidate offered outside its window fails on the window either way.
+        let plain_inside = !PERIODIC || (self.layout.n_strips >= 5 && reach <= 0.5 * width);
         let no_entries: &[Entry] = &[];
         for strip in local {
             let own_entries = &self.strips[strip][..];
@@ -664,18 +671,27 @@ impl StripGrid {
             } else {
                 no_entries
             };
+            let north_is_first = self.first + strip + 1 == self.layout.n_strips;
             // First north disk not left of the current window; the window only moves right.
             let mut north_first = 0;
             for (pos, a) in own_entries.iter().enumerate() {
                 // Own strip: the disks to the right within reach.
                 let right = |b: &Entry| b.x - a.x < reach;
                 let own = &own_entries[pos + 1..];
-                offer_window::<OWN_WINDOW>(own, a, right, &within, sink);
+                if plain_inside {
+                    offer_window::<OWN_WINDOW>(own, a, right, &plain, sink);
+                } else {
+                    offer_window::<OWN_WINDOW>(own, a, right, &imaged, sink);
+                }
                 // North strip: the disks within reach on either side.
                 north_first = first_in_window(north_entries, north_first, a.x - reach);
                 let left = |b: &Entry| b.x < a.x + reach;
                 let north = &north_entries[north_first..];
-                offer_window::<NORTH_WINDOW>(north, a, left, &within, sink);
+                if plain_inside && !north_is_first {
+                    offer_window::<NORTH_WINDOW>(north, a, left, &plain, sink);
+                } else {
+                    offer_window::<NORTH_WINDOW>(north, a, left, &imaged, sink);
+                }
                 if PERIODIC {
                     // The same windows seen through the periodic image in x.
                     if a.x + reach > width {
@@ -685,7 +701,7 @@ impl StripGrid {
                         {
                             sink.make_room(1);
                             // SAFETY: room was made just above.
-                            unsafe { sink.offer(within(a, b), a, b) };
+                            unsafe { sink.offer(imaged(a, b), a, b) };
                         }
                         for b in north_entries
                             .iter()
@@ -693,7 +709,7 @@ impl StripGrid {
                         {
                             sink.make_room(1);
                             // SAFETY: room was made just above.
-                            unsafe { sink.offer(within(a, b), a, b) };
+                            unsafe { sink.offer(imaged(a, b), a, b) };
                         }
                     }
                     if a.x - reach < 0.0 {
@@ -704,7 +720,7 @@ impl StripGrid {
                         {
                             sink.make_room(1);
                             // SAFETY: room was made just above.
-                            unsafe { sink.offer(within(a, b), a, b) };
+                            unsafe { sink.offer(imaged(a, b), a, b) };
                         }
                     }
                 }
@@ -1032,17 +1048,22 @@ mod tests {
     use super::*;
     use crate::sim::particles::Disk;
 
-    /// 300 disks in a corner far from the origin of a box 2²⁵ wide, where f32 positions
-    /// are 4 apart: centres 0.001–3 apart, radii equal or not. The f32 entries alone
-    /// would misjudge most of these pairs.
-    fn far_cluster(equal_radii: bool) -> Particles {
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut uniform = move || {
+    /// Numbers uniform in [0, 1) from a linear congruential generator started at `state`:
+    /// the tests' own, the same on every platform and crate version.
+    fn uniform_from(mut state: u64) -> impl FnMut() -> f64 {
+        move || {
             state = state
                 .wrapping_mul(6_364_136_223_846_793_005)
                 .wrapping_add(1_442_695_040_888_963_407);
             (state >> 11) as f64 / (1_u64 << 53) as f64
-        };
+        }
+    }
+
+    /// 300 disks in a corner far from the origin of a box 2²⁵ wide, where f32 positions
+    /// are 4 apart: centres 0.001–3 apart, radii equal or not. The f32 entries alone
+    /// would misjudge most of these pairs.
+    fn far_cluster(equal_radii: bool) -> Particles {
+        let mut uniform = uniform_from(0x9e37_79b9_7f4a_7c15);
         let disks: Vec<Disk> = (0..300)
             .map(|_| Disk {
                 x: 33_554_000.0 + 30.0 * uniform(),
@@ -1161,6 +1182,69 @@ mod tests {
                         }
                     }
                 }
+            }
+        }
+    }
+
+    /// In periodic boxes from 3 to 8 strips tall, and from narrower than two reaches to
+    /// wide, the exact search finds exactly the all-pairs contacts and a neighbour list
+    /// holds every pair within its skin, through the edges too: the scan leaves out the
+    /// minimum image only where it changes nothing (at least 5 strips, a reach of at
+    /// most half the width, not across the last strip).
+    #[test]
+    fn periodic_boxes_of_few_strips_miss_no_pair_across_their_edges() {
+        let mut uniform = uniform_from(0x2545_f491_4f6c_dd1d);
+        let skin = 1.0;
+        // Strips 2·r + skin = 3 tall.
+        for n_strips in 3..=8 {
+            for width in [5.0, 9.0, 40.0] {
+                let domain = Domain {
+                    width,
+                    height: 3.0 * n_strips as f64 + 0.5,
+                    boundary: Boundary::Periodic,
+                };
+                let n = (domain.area() * 0.25) as usize;
+                let disks: Vec<Disk> = (0..n)
+                    .map(|_| Disk {
+                        x: domain.width * uniform(),
+                        y: domain.height * uniform(),
+                        vx: 0.0,
+                        vy: 0.0,
+                        radius: 1.0,
+                        mass: 1.0,
+                    })
+                    .collect();
+                let particles = Particles::from_disks(&disks);
+                let case = format!("{n_strips} strips, width {width}");
+                let grid = StripGrid::new(&domain, &particles);
+                let (mut found, mut all) = (Vec::new(), Vec::new());
+                grid.find_contacts(&particles, &domain, &mut found);
+                find_contacts_all_pairs(&particles, &domain, &mut all);
+                let keys = |contacts: &[Contact]| {
+                    let mut keys: Vec<u64> = contacts.iter().map(|c| c.key).collect();
+                    keys.sort_unstable();
+                    keys
+                };
+                assert_eq!(keys(&found), keys(&all), "{case}");
+
+                let listing = StripGrid::with_skin(&domain, &particles, skin);
+                assert_eq!(listing.layout().n_strips, n_strips, "{case}");
+                let mut listed = Vec::new();
+                listing.find_pairs_in(listing.owned(), &particles, &domain, skin, &mut listed);
+                let listed = sorted(listed);
+                let (x, y) = (&particles.x, &particles.y);
+                let mut near = 0;
+                for i in 0..n {
+                    for j in i + 1..n {
+                        let (dx, dy) = domain.separation(x[i], y[i], x[j], y[j]);
+                        if dx * dx + dy * dy < 3.0 * 3.0 {
+                            let pair = [i as u32, j as u32];
+                            assert!(listed.binary_search(&pair).is_ok(), "{pair:?}, {case}");
+                            near += 1;
+                        }
+                    }
+                }
+                assert!(near > n / 2, "{case}: {near} pairs within the skin");
             }
         }
     }
