@@ -649,8 +649,12 @@ impl StripGrid {
             dx * dx + dy * dy < limit * limit
         };
         let superset = !S::EXACT && EQUAL_RADII;
-        let decide = |near: bool, a: &Entry, b: &Entry| {
-            if superset { near } else { near && exact(a, b) }
+        let decide = |nearby: bool, a: &Entry, b: &Entry| {
+            if superset {
+                nearby
+            } else {
+                nearby && exact(a, b)
+            }
         };
         let imaged = |a: &Entry, b: &Entry| decide(near(a, b), a, b);
         let plain = |a: &Entry, b: &Entry| decide(near_plain(a, b), a, b);
@@ -1149,39 +1153,9 @@ mod tests {
             };
             for equal_radii in [true, false] {
                 let particles = far_cluster(equal_radii);
-                let grid = StripGrid::new(&domain, &particles);
-                let mut found = Vec::new();
-                grid.find_contacts(&particles, &domain, &mut found);
-                let mut all = Vec::new();
-                find_contacts_all_pairs(&particles, &domain, &mut all);
-                let keys = |contacts: &[Contact]| {
-                    let mut keys: Vec<u64> = contacts.iter().map(|c| c.key).collect();
-                    keys.sort_unstable();
-                    keys
-                };
-                assert_eq!(
-                    keys(&found),
-                    keys(&all),
-                    "{boundary:?}, equal radii {equal_radii}"
-                );
-                assert!(all.len() > 100, "the cluster is dense: {} pairs", all.len());
-
-                let skin = 0.5;
-                let listing = StripGrid::with_skin(&domain, &particles, skin);
-                let mut listed = Vec::new();
-                listing.find_pairs_in(listing.owned(), &particles, &domain, skin, &mut listed);
-                let listed = sorted(listed);
-                let (x, y, r) = (&particles.x, &particles.y, &particles.radius);
-                for i in 0..particles.len() {
-                    for j in i + 1..particles.len() {
-                        let (dx, dy) = domain.separation(x[i], y[i], x[j], y[j]);
-                        let limit = r[i] + r[j] + skin;
-                        if dx * dx + dy * dy < limit * limit {
-                            let pair = [i as u32, j as u32];
-                            assert!(listed.binary_search(&pair).is_ok(), "{pair:?} listed");
-                        }
-                    }
-                }
+                let case = format!("{boundary:?}, equal radii {equal_radii}");
+                let (contacts, _) = assert_searches_miss_no_pair(&domain, &particles, 0.5, &case);
+                assert!(contacts > 100, "the cluster is dense: {contacts} pairs");
             }
         }
     }
@@ -1216,36 +1190,54 @@ mod tests {
                     .collect();
                 let particles = Particles::from_disks(&disks);
                 let case = format!("{n_strips} strips, width {width}");
-                let grid = StripGrid::new(&domain, &particles);
-                let (mut found, mut all) = (Vec::new(), Vec::new());
-                grid.find_contacts(&particles, &domain, &mut found);
-                find_contacts_all_pairs(&particles, &domain, &mut all);
-                let keys = |contacts: &[Contact]| {
-                    let mut keys: Vec<u64> = contacts.iter().map(|c| c.key).collect();
-                    keys.sort_unstable();
-                    keys
-                };
-                assert_eq!(keys(&found), keys(&all), "{case}");
-
-                let listing = StripGrid::with_skin(&domain, &particles, skin);
-                assert_eq!(listing.layout().n_strips, n_strips, "{case}");
-                let mut listed = Vec::new();
-                listing.find_pairs_in(listing.owned(), &particles, &domain, skin, &mut listed);
-                let listed = sorted(listed);
-                let (x, y) = (&particles.x, &particles.y);
-                let mut near = 0;
-                for i in 0..n {
-                    for j in i + 1..n {
-                        let (dx, dy) = domain.separation(x[i], y[i], x[j], y[j]);
-                        if dx * dx + dy * dy < 3.0 * 3.0 {
-                            let pair = [i as u32, j as u32];
-                            assert!(listed.binary_search(&pair).is_ok(), "{pair:?}, {case}");
-                            near += 1;
-                        }
-                    }
-                }
+                let layout = StripLayout::with_skin(&domain, &particles, skin);
+                assert_eq!(layout.n_strips, n_strips, "{case}");
+                let (_, near) = assert_searches_miss_no_pair(&domain, &particles, skin, &case);
                 assert!(near > n / 2, "{case}: {near} pairs within the skin");
             }
         }
+    }
+
+    /// Asserts that the exact search finds exactly the all-pairs contacts of `particles`
+    /// and that a neighbour list with `skin` holds every pair within the skin of
+    /// touching; returns how many contacts and how many pairs within the skin there are.
+    fn assert_searches_miss_no_pair(
+        domain: &Domain,
+        particles: &Particles,
+        skin: f64,
+        case: &str,
+    ) -> (usize, usize) {
+        let grid = StripGrid::new(domain, particles);
+        let (mut found, mut all) = (Vec::new(), Vec::new());
+        grid.find_contacts(particles, domain, &mut found);
+        find_contacts_all_pairs(particles, domain, &mut all);
+        let keys = |contacts: &[Contact]| {
+            let mut keys: Vec<u64> = contacts.iter().map(|c| c.key).collect();
+            keys.sort_unstable();
+            keys
+        };
+        assert_eq!(keys(&found), keys(&all), "{case}");
+
+        let listing = StripGrid::with_skin(domain, particles, skin);
+        let mut listed = Vec::new();
+        listing.find_pairs_in(listing.owned(), particles, domain, skin, &mut listed);
+        let listed = sorted(listed);
+        let (x, y, r) = (&particles.x, &particles.y, &particles.radius);
+        let mut near = 0;
+        for i in 0..particles.len() {
+            for j in i + 1..particles.len() {
+                let (dx, dy) = domain.separation(x[i], y[i], x[j], y[j]);
+                let limit = r[i] + r[j] + skin;
+                if dx * dx + dy * dy < limit * limit {
+                    let pair = [i as u32, j as u32];
+                    assert!(
+                        listed.binary_search(&pair).is_ok(),
+                        "{pair:?} listed, {case}"
+                    );
+                    near += 1;
+                }
+            }
+        }
+        (all.len(), near)
     }
 }
