@@ -7,6 +7,7 @@
 use std::ops::{Range, RangeInclusive};
 
 use super::particles::{Particles, gather};
+use super::prefetch::prefetch;
 use super::scene::{Boundary, Domain, minimum_image};
 
 /// An overlapping pair. `a` is the storage index of the disk with the lower id.
@@ -223,6 +224,54 @@ impl StripGrid {
             Some(owned)
         } else {
             (self.ghost_strip() == Some(strip)).then_some(self.n_owned)
+        }
+    }
+
+    /// Asks the caches for what the queries of later movers read, in three stages a
+    /// few movers apart: the position of the mover [`QUERY_AHEAD`] on; in each strip it
+    /// reads, the entry where the window of the mover half as far on likely starts (the
+    /// guess of [`first_at_or_right_of`]; that mover's position fetched by then); and
+    /// the position of the disk that entry names, for the mover a quarter as far on (its
+    /// entries fetched by then). Hints only: a guess may be off, and results do not
+    /// change. At 10⁶ disks and packing 0.3 the queries took 1.0 instead of 1.2 ns per
+    /// disk-step (`docs/performance.md`).
+    #[inline(always)]
+    fn prefetch_query<const PERIODIC: bool>(
+        &self,
+        movers: &[u32],
+        pos: usize,
+        moved: f64,
+        particles: &Particles,
+    ) {
+        let (x, y) = (&particles.x, &particles.y);
+        if let Some(&far) = movers.get(pos + QUERY_AHEAD) {
+            prefetch(&x[far as usize]);
+            prefetch(&y[far as usize]);
+        }
+        let n_strips = self.layout.n_strips as i64;
+        let width = self.layout.width;
+        for (ahead, named_disks) in [(QUERY_AHEAD / 2, false), (QUERY_AHEAD / 4, true)] {
+            let Some(&next) = movers.get(pos + ahead) else {
+                continue;
+            };
+            let (xa, ya) = (x[next as usize], y[next as usize]);
+            let reach = self.query_reach(particles.radius[next as usize], moved);
+            for strip in self.query_strips::<PERIODIC>(ya, reach) {
+                let Some(local) = self.local_strip(strip.rem_euclid(n_strips) as usize) else {
+                    continue;
+                };
+                let entries = &self.strips[local][..];
+                let guess = (((xa - reach) / width * entries.len() as f64) as usize)
+                    .min(entries.len().saturating_sub(1));
+                if let Some(entry) = entries.get(guess) {
+                    if named_disks {
+                        prefetch(&x[entry.idx as usize]);
+                        prefetch(&y[entry.idx as usize]);
+                    } else {
+                        prefetch(entry);
+                    }
+                }
+            }
         }
     }
 
@@ -494,7 +543,8 @@ impl StripGrid {
         let (x, y, radius) = (&particles.x, &particles.y, &particles.radius);
         let n_strips = self.layout.n_strips as i64;
         let width = self.layout.width;
-        for &mover in movers {
+        for (pos, &mover) in movers.iter().enumerate() {
+            self.prefetch_query::<PERIODIC>(movers, pos, moved, particles);
             let a = mover as usize;
             let (xa, ya) = (x[a], y[a]);
             let reach = self.query_reach(radius[a], moved);
@@ -732,6 +782,9 @@ impl StripGrid {
         }
     }
 }
+
+/// Movers ahead of a query whose positions are fetched ([`StripGrid::prefetch_query`]).
+const QUERY_AHEAD: usize = 8;
 
 /// Entries a window's left end passes tested at once ([`first_in_window`]).
 const WINDOW_STEP: usize = 4;
