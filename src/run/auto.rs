@@ -53,22 +53,23 @@ pub struct Measured {
 /// rates from the last, the first to time them with the state cold in the caches).
 /// The step method's rates are the median of three later runs of
 /// `cargo bench --features mpi --bench kernels -- '^step/'` on the same machine
-/// (2026-11-25, 11:14–11:18 UTC, after periodic boxes stopped paying for the minimum
-/// image where it changes nothing; the runs differed by up to 21%): 1.06–1.33× the
-/// rates of 10:10–10:14 UTC, which were within −5% and −1% of those of 05:49–06:01 UTC.
+/// (2026-11-25, 13:24–13:28 UTC, after prefetches into the second-level cache sped up
+/// the resolution and the escapee queries of large scenes; the runs differed by up to
+/// 18%): 0.95–0.98× the rates of 11:14–11:18 UTC at 10⁴ (untouched: noise), 1.04–1.11×
+/// at 10⁵, 1.11–1.19× at 10⁶.
 /// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [
-        measured(1e4, 0.05, 132.2e6, 0.947e6, 432e6),
-        measured(1e4, 0.3, 68.1e6, 1.49e6, 457e6),
+        measured(1e4, 0.05, 129.5e6, 0.947e6, 432e6),
+        measured(1e4, 0.3, 64.6e6, 1.49e6, 457e6),
     ],
     [
-        measured(1e5, 0.05, 117.7e6, 0.235e6, 68.0e6),
-        measured(1e5, 0.3, 62.1e6, 0.612e6, 90.6e6),
+        measured(1e5, 0.05, 130.5e6, 0.235e6, 68.0e6),
+        measured(1e5, 0.3, 64.5e6, 0.612e6, 90.6e6),
     ],
     [
-        measured(1e6, 0.05, 93.2e6, 0.190e6, 79.6e6),
-        measured(1e6, 0.3, 46.4e6, 0.456e6, 110e6),
+        measured(1e6, 0.05, 103.4e6, 0.190e6, 79.6e6),
+        measured(1e6, 0.3, 55.1e6, 0.456e6, 110e6),
     ],
 ];
 
