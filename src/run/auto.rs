@@ -54,9 +54,10 @@ pub struct Measured {
 /// The step method's rates are the median of three later runs of
 /// `cargo bench --features mpi --bench kernels -- '^step/'` on the same machine
 /// (2026-11-25, 13:24–13:28 UTC, after prefetches into the second-level cache sped up
-/// the resolution and the escapee queries of large scenes; the runs differed by up to
-/// 18%): 0.95–0.98× the rates of 11:14–11:18 UTC at 10⁴ (untouched: noise), 1.04–1.11×
-/// at 10⁵, 1.11–1.19× at 10⁶.
+/// the resolution of large scenes; the runs differed by up to 18%, and their build also
+/// fetched ahead in the escapee queries, since removed as worth under 1%): 0.95–0.98×
+/// the rates of 11:14–11:18 UTC at 10⁴ (untouched: noise), 1.04–1.11× at 10⁵,
+/// 1.11–1.19× at 10⁶.
 /// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [

@@ -7,7 +7,6 @@
 use std::ops::{Range, RangeInclusive};
 
 use super::particles::{Particles, gather};
-use super::prefetch::prefetch;
 use super::scene::{Boundary, Domain, minimum_image};
 
 /// An overlapping pair. `a` is the storage index of the disk with the lower id.
@@ -225,64 +224,6 @@ impl StripGrid {
         } else {
             (self.ghost_strip() == Some(strip)).then_some(self.n_owned)
         }
-    }
-
-    /// Asks the caches for what the queries of later movers read, in three stages a
-    /// few movers apart: the position of the mover [`QUERY_AHEAD`] on; in each strip it
-    /// reads, the entry where the window of the mover half as far on likely starts (the
-    /// guess of [`first_at_or_right_of`], [`guess_position`]; that mover's position
-    /// fetched by then); and
-    /// the position of the disk that entry names, for the mover a quarter as far on (its
-    /// entries fetched by then). Hints only: a guess may be off, and results do not
-    /// change. At 10⁶ disks and packing 0.3 the queries took 1.1 instead of 1.3 ns per
-    /// disk-step (`docs/performance.md`).
-    #[inline(always)]
-    fn prefetch_query<const PERIODIC: bool>(
-        &self,
-        movers: &[u32],
-        pos: usize,
-        moved: f64,
-        particles: &Particles,
-    ) {
-        let (x, y) = (&particles.x, &particles.y);
-        if let Some(&far) = movers.get(pos + QUERY_AHEAD) {
-            prefetch(&x[far as usize]);
-            prefetch(&y[far as usize]);
-        }
-        for (ahead, named_disks) in [(QUERY_AHEAD / 2, false), (QUERY_AHEAD / 4, true)] {
-            let Some(&next) = movers.get(pos + ahead) else {
-                continue;
-            };
-            let (xa, ya) = (x[next as usize], y[next as usize]);
-            let reach = self.query_reach(particles.radius[next as usize], moved);
-            for entries in self.query_entries::<PERIODIC>(ya, reach) {
-                let guess = guess_position(entries.len(), xa - reach, self.layout.width);
-                if let Some(entry) = entries.get(guess) {
-                    if named_disks {
-                        prefetch(&x[entry.idx as usize]);
-                        prefetch(&y[entry.idx as usize]);
-                    } else {
-                        prefetch(entry);
-                    }
-                }
-            }
-        }
-    }
-
-    /// The entries of the strips a query around height `y` reaching `reach` reads
-    /// (those of [`StripGrid::query_strips`] that this grid holds).
-    #[inline(always)]
-    fn query_entries<const PERIODIC: bool>(
-        &self,
-        y: f64,
-        reach: f64,
-    ) -> impl Iterator<Item = &[Entry]> {
-        let n_strips = self.layout.n_strips as i64;
-        self.query_strips::<PERIODIC>(y, reach)
-            .filter_map(move |strip| {
-                let local = self.local_strip(strip.rem_euclid(n_strips) as usize)?;
-                Some(&self.strips[local][..])
-            })
     }
 
     /// Whether a query ([`StripGrid::find_contacts_of`]) around a disk of radius
@@ -551,9 +492,9 @@ impl StripGrid {
         contacts: &mut Vec<Contact>,
     ) {
         let (x, y, radius) = (&particles.x, &particles.y, &particles.radius);
+        let n_strips = self.layout.n_strips as i64;
         let width = self.layout.width;
-        for (pos, &mover) in movers.iter().enumerate() {
-            self.prefetch_query::<PERIODIC>(movers, pos, moved, particles);
+        for &mover in movers {
             let a = mover as usize;
             let (xa, ya) = (x[a], y[a]);
             let reach = self.query_reach(radius[a], moved);
@@ -573,7 +514,11 @@ impl StripGrid {
             // The entries' x is rounded to f32: widen the windows by the rounding of any x
             // inside them (at most |xa| + reach, or the box's width when periodic).
             let slack = rounding_slack(xa.abs().max(width) + reach);
-            for entries in self.query_entries::<PERIODIC>(ya, reach) {
+            for strip in self.query_strips::<PERIODIC>(ya, reach) {
+                let Some(local) = self.local_strip(strip.rem_euclid(n_strips) as usize) else {
+                    continue;
+                };
+                let entries = &self.strips[local][..];
                 // A window with `from == to` holds nothing.
                 for &(from, to) in windows.iter().filter(|(from, to)| from < to) {
                     let (from, to) = (from - slack, to + slack);
@@ -788,9 +733,6 @@ impl StripGrid {
     }
 }
 
-/// Movers ahead of a query whose positions are fetched ([`StripGrid::prefetch_query`]).
-const QUERY_AHEAD: usize = 8;
-
 /// Entries a window's left end passes tested at once ([`first_in_window`]).
 const WINDOW_STEP: usize = 4;
 
@@ -876,7 +818,8 @@ trait Sink {
 fn first_at_or_right_of(entries: &[Entry], from: f64, width: f64) -> usize {
     let below = |idx: usize| f64::from(entries[idx].x) < from;
     let len = entries.len();
-    let guess = guess_position(len, from, width);
+    // A saturating cast: a NaN or negative guess is 0, a huge one `len`.
+    let guess = ((from / width * len as f64) as usize).min(len);
     let mut reach = 1;
     loop {
         let (lo, hi) = (guess.saturating_sub(reach), (guess + reach).min(len));
@@ -887,14 +830,6 @@ fn first_at_or_right_of(entries: &[Entry], from: f64, width: f64) -> usize {
         }
         reach *= 2;
     }
-}
-
-/// Where a strip of `len` disks spread evenly across a box `width` wide would hold x =
-/// `from`: an index in `0..=len` (a saturating cast: a NaN or negative guess is 0, a
-/// huge one `len`).
-#[inline(always)]
-fn guess_position(len: usize, from: f64, width: f64) -> usize {
-    ((from / width * len as f64) as usize).min(len)
 }
 
 /// How far a test on f32 entries must be widened to never reject a pair the f64
