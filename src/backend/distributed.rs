@@ -28,7 +28,8 @@ use crate::backend::{
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
 use crate::sim::grid::{
-    Contact, Mover, StripGrid, StripLayout, receive_band, refresh_band, sort_movers,
+    Contact, Mover, StripGrid, StripLayout, order_canonically, receive_band, refresh_band,
+    sort_movers,
 };
 use crate::sim::neighbours::{PairList, Skin, larger};
 use crate::sim::observe::observe;
@@ -533,7 +534,7 @@ impl RankState {
             |disk: u32| disk as usize >= n_own || exported.contains(disk) || sent.contains(disk);
         self.shared.clear();
         self.schedule.split(
-            particles.len(),
+            &particles.id,
             &mut self.contacts,
             &mut self.shared,
             seen_elsewhere,
@@ -601,13 +602,12 @@ impl RankState {
                         (disks.len() - 1) as u32
                     })
                 });
-                contacts.push(Contact::new(&disks, slot_a as usize, slot_b as usize));
+                contacts.push(Contact::new(slot_a as usize, slot_b as usize));
             }
         }
         // Canonical order: every rank resolves the same list the same way. A pair of an
         // escapee may have been found by two ranks: resolved once.
-        contacts.sort_unstable_by_key(|contact| contact.key);
-        contacts.dedup_by_key(|contact| contact.key);
+        order_canonically(&mut contacts, &disks.id, &mut Vec::new());
         resolve_contacts(
             &mut disks,
             &self.domain,

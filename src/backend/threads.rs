@@ -24,7 +24,8 @@ use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
 use crate::sim::collision::DiskState;
 use crate::sim::grid::{
-    Contact, Entry, Mover, StripGrid, find_contacts_all_pairs_from, receive_band, refresh_band,
+    Contact, Entry, Mover, StripGrid, find_contacts_all_pairs_from, order_canonically,
+    receive_band, refresh_band,
 };
 use crate::sim::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin, round_positions};
 use crate::sim::observe::observe;
@@ -132,6 +133,8 @@ pub struct ThreadedStepper {
     handed_over: Vec<Vec<Contact>>,
     /// Every band's handed-over pairs, in canonical order.
     crossing: Vec<Contact>,
+    /// Scratch for putting pairs in canonical order.
+    keyed: Vec<(u64, Contact)>,
     /// Per band: union–find scratch.
     schedules: Vec<ContactSchedule>,
     pub counters: StepCounters,
@@ -162,6 +165,7 @@ impl ThreadedStepper {
             contacts: Vec::new(),
             handed_over: Vec::new(),
             crossing: Vec::new(),
+            keyed: Vec::new(),
             schedules: Vec::new(),
             counters: StepCounters::default(),
             stages: StageSeconds::default(),
@@ -261,15 +265,14 @@ impl ThreadedStepper {
                         handed_over.clear();
                         list.find_contacts(particles, domain, &mut contacts);
                         // Split while the pairs are in list order, close in memory.
-                        schedule.split(particles.len(), &mut contacts, &mut handed_over, pinned);
+                        schedule.split(&particles.id, &mut contacts, &mut handed_over, pinned);
                         *band_contacts = contacts;
                         *band_handed_over = handed_over;
                     });
                 self.crossing.extend(self.handed_over.iter().flatten());
                 self.crossing.extend_from_slice(&escaped);
-                self.crossing.sort_unstable_by_key(|contact| contact.key);
-                // An escapee's pair may also be listed: keep it once.
-                self.crossing.dedup_by_key(|contact| contact.key);
+                // An escapee's pair may also be listed: kept once.
+                order_canonically(&mut self.crossing, &particles.id, &mut self.keyed);
                 for contact in &escaped {
                     self.touched[contact.a as usize] = false;
                     self.touched[contact.b as usize] = false;
@@ -418,7 +421,7 @@ impl ThreadedStepper {
         self.contacts.resize_with(1, Vec::new);
         self.contacts[0].clear();
         self.contacts[0].extend(found.into_iter().flatten());
-        self.contacts[0].par_sort_unstable_by_key(|contact| contact.key);
+        order_canonically(&mut self.contacts[0], &particles.id, &mut self.keyed);
     }
 
     fn resolve_contacts(&mut self, particles: &mut Particles) {

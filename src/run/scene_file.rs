@@ -816,8 +816,12 @@ impl Validator<'_> {
         let grid = StripGrid::new(domain, particles);
         let mut contacts = Vec::new();
         grid.find_contacts(particles, domain, &mut contacts);
-        if let Some(first) = contacts.iter().min_by_key(|contact| contact.key) {
-            let (a, b) = (first.a as usize, first.b as usize);
+        if let Some(first) = contacts
+            .iter()
+            .min_by_key(|contact| contact.key(&particles.id))
+        {
+            // The disk given later in the file is the one to name.
+            let (a, b) = (first.a.min(first.b) as usize, first.a.max(first.b) as usize);
             return Err(self.invalid(
                 origins[b],
                 &format!("scene.particle[{b}]"),

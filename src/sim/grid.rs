@@ -9,31 +9,50 @@ use std::ops::{Range, RangeInclusive};
 use super::particles::{Particles, gather};
 use super::scene::{Boundary, Domain, minimum_image};
 
-/// An overlapping pair. `a` is the storage index of the disk with the lower id.
+/// An overlapping pair: the storage indices of its two disks, in either order. Every
+/// law applied to a pair gives the same bits with its disks swapped
+/// ([`crate::sim::collision`]), so a pair needs no orientation, and its ids are read
+/// only where the canonical order is needed ([`Contact::key`]): not for the lone pairs
+/// that most of a step's are.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Contact {
-    /// `(lower id << 32) | higher id`: sorting by key gives the canonical pair order.
-    pub key: u64,
     pub a: u32,
     pub b: u32,
 }
 
 impl Contact {
-    /// The contact between the disks stored at `i` and `j`, oriented by id.
+    /// The contact between the disks stored at `i` and `j`.
     #[inline(always)]
-    pub fn new(particles: &Particles, i: usize, j: usize) -> Contact {
-        let (id_i, id_j) = (particles.id[i], particles.id[j]);
-        let (lo, hi, a, b) = if id_i < id_j {
-            (id_i, id_j, i, j)
-        } else {
-            (id_j, id_i, j, i)
-        };
+    pub fn new(i: usize, j: usize) -> Contact {
         Contact {
-            key: (u64::from(lo) << 32) | u64::from(hi),
-            a: a as u32,
-            b: b as u32,
+            a: i as u32,
+            b: j as u32,
         }
     }
+
+    /// `(lower id << 32) | higher id`, by the disks' ids `ids` (one per storage index):
+    /// sorting by key gives the canonical pair order.
+    #[inline(always)]
+    pub fn key(&self, ids: &[u32]) -> u64 {
+        let (id_a, id_b) = (ids[self.a as usize], ids[self.b as usize]);
+        (u64::from(id_a.min(id_b)) << 32) | u64::from(id_a.max(id_b))
+    }
+}
+
+/// Puts `contacts` in canonical order ([`Contact::key`], by the disks' ids `ids`), a pair
+/// found twice kept once. `keyed` is scratch memory (each key is read once, not at every
+/// comparison).
+pub fn order_canonically(
+    contacts: &mut Vec<Contact>,
+    ids: &[u32],
+    keyed: &mut Vec<(u64, Contact)>,
+) {
+    keyed.clear();
+    keyed.extend(contacts.iter().map(|contact| (contact.key(ids), *contact)));
+    keyed.sort_unstable_by_key(|&(key, _)| key);
+    keyed.dedup_by_key(|&mut (key, _)| key);
+    contacts.clear();
+    contacts.extend(keyed.iter().map(|&(_, contact)| contact));
 }
 
 /// One disk in the sorted view: what the pair scan reads, 12 bytes, kept in x order
@@ -437,10 +456,7 @@ impl StripGrid {
         domain: &Domain,
         contacts: &mut Vec<Contact>,
     ) {
-        let mut sink = ContactSink {
-            particles,
-            contacts,
-        };
+        let mut sink = ContactSink { contacts };
         self.scan_in(strips, particles, domain, 0.0, &mut sink);
     }
 
@@ -531,7 +547,7 @@ impl StripGrid {
                         let (dx, dy) = domain.separation_in::<PERIODIC>(xa, ya, x[j], y[j]);
                         let contact = radius[a] + radius[j];
                         if dx * dx + dy * dy < contact * contact {
-                            contacts.push(Contact::new(particles, a, j));
+                            contacts.push(Contact::new(a, j));
                         }
                     }
                 }
@@ -853,7 +869,6 @@ fn rounded_up(value: f64) -> f32 {
 
 /// Overlapping pairs as [`Contact`]s. Few candidates overlap: the branch is predictable.
 struct ContactSink<'a> {
-    particles: &'a Particles,
     contacts: &'a mut Vec<Contact>,
 }
 
@@ -862,7 +877,7 @@ impl Sink for ContactSink<'_> {
     #[inline(always)]
     unsafe fn offer(&mut self, accepted: bool, a: &Entry, b: &Entry) {
         if accepted {
-            let contact = Contact::new(self.particles, a.idx as usize, b.idx as usize);
+            let contact = Contact::new(a.idx as usize, b.idx as usize);
             self.contacts.push(contact);
         }
     }
@@ -1041,7 +1056,7 @@ fn all_pairs<const PERIODIC: bool>(
             let (dx, dy) = domain.separation_in::<PERIODIC>(x[i], y[i], x[j], y[j]);
             let contact = radius[i] + radius[j];
             if dx * dx + dy * dy < contact * contact {
-                contacts.push(Contact::new(particles, i, j));
+                contacts.push(Contact::new(i, j));
             }
         }
     }
@@ -1212,7 +1227,7 @@ mod tests {
         grid.find_contacts(particles, domain, &mut found);
         find_contacts_all_pairs(particles, domain, &mut all);
         let keys = |contacts: &[Contact]| {
-            let mut keys: Vec<u64> = contacts.iter().map(|c| c.key).collect();
+            let mut keys: Vec<u64> = contacts.iter().map(|c| c.key(&particles.id)).collect();
             keys.sort_unstable();
             keys
         };

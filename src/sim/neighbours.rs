@@ -464,7 +464,7 @@ impl PairList {
                     // SAFETY: `reserve` left room for the whole group; the length grows
                     // over a written contact only.
                     unsafe {
-                        let contact = Contact::new(particles, a as usize, b as usize);
+                        let contact = Contact { a, b };
                         contacts.as_mut_ptr().add(len).write(contact);
                         contacts.set_len(len + usize::from(hit));
                     }
@@ -473,7 +473,7 @@ impl PairList {
         }
         for &[a, b] in groups.remainder() {
             if overlaps([a, b]) {
-                contacts.push(Contact::new(particles, a as usize, b as usize));
+                contacts.push(Contact { a, b });
             }
         }
     }
@@ -625,7 +625,7 @@ mod tests {
                         stepper.find_contacts(&mut particles);
                         rebuilt_or_patched += usize::from(!stepper.escapees.is_empty());
                         assert_eq!(
-                            sorted_keys(stepper.contacts()),
+                            sorted_keys(stepper.contacts(), &particles),
                             fresh_keys(&scene, &particles),
                             "{boundary:?} packing {packing} dt {dt} step {step}"
                         );
@@ -642,12 +642,12 @@ mod tests {
         let mut fresh = Vec::new();
         let grid = StripGrid::new(&scene.domain, particles);
         grid.find_contacts(particles, &scene.domain, &mut fresh);
-        sorted_keys(&fresh)
+        sorted_keys(&fresh, particles)
     }
 
-    /// The keys of `contacts` in canonical order.
-    fn sorted_keys(contacts: &[Contact]) -> Vec<u64> {
-        let mut keys: Vec<u64> = contacts.iter().map(|contact| contact.key).collect();
+    /// The keys of `contacts` (of `particles`) in canonical order.
+    fn sorted_keys(contacts: &[Contact], particles: &Particles) -> Vec<u64> {
+        let mut keys: Vec<u64> = contacts.iter().map(|c| c.key(&particles.id)).collect();
         keys.sort_unstable();
         keys
     }
@@ -678,7 +678,7 @@ mod tests {
         particles.y[last] = particles.y[0];
         stepper.find_contacts(&mut particles);
         assert_eq!(
-            sorted_keys(stepper.contacts()),
+            sorted_keys(stepper.contacts(), &particles),
             fresh_keys(&scene, &particles)
         );
         assert!(!stepper.contacts().is_empty());

@@ -13,7 +13,7 @@
 //! ([`ResolutionOrder`]): a pair that shares no disk with any other is a chain of its
 //! own and may go anywhere, so it goes in the order found, next to the disks it reads.
 
-use super::grid::Contact;
+use super::grid::{Contact, order_canonically};
 
 /// Scratch memory for splitting contacts by chain, per storage index: the union–find
 /// parent, and whether the disk's chain holds a pinned disk (valid for disks in this
@@ -26,11 +26,13 @@ pub struct ContactSchedule {
 }
 
 /// Scratch memory for putting one worker's contacts in an order that resolves to the
-/// serial bits: which disks the contacts hold, and the contacts that share a disk.
+/// serial bits: which disks the contacts hold, the contacts that share a disk, and
+/// those with their keys.
 #[derive(Clone, Debug, Default)]
 pub struct ResolutionOrder {
     holdings: Holdings,
     chained: Vec<Contact>,
+    keyed: Vec<(u64, Contact)>,
 }
 
 /// Which disks, by storage index, one or several of a step's contacts hold: two bits a
@@ -112,11 +114,11 @@ impl ResolutionOrder {
     /// resolution with the canonical bits: first the pairs that share no disk with
     /// another, in the order found, then the others in canonical order ([`Contact::key`])
     /// with repeats removed. The lists find pairs in storage order, so the first part
-    /// reads nearby memory; canonical order alone reads disks in random places.
-    /// `n_particles` bounds the storage indices.
-    pub fn arrange(&mut self, n_particles: usize, contacts: &mut Vec<Contact>) {
-        let mut chained = self.set_apart_chained(n_particles, contacts);
-        Self::append_in_canonical_order(contacts, &mut chained);
+    /// reads nearby memory; canonical order alone reads disks in random places. `ids`
+    /// holds the disks' ids by storage index; only the chained pairs' are read.
+    pub fn arrange(&mut self, ids: &[u32], contacts: &mut Vec<Contact>) {
+        let mut chained = self.set_apart_chained(ids.len(), contacts);
+        self.append_in_canonical_order(ids, contacts, &mut chained);
         self.chained = chained;
     }
 
@@ -151,28 +153,33 @@ impl ResolutionOrder {
     }
 
     /// Appends `chained` to `contacts` in canonical order, a pair found twice once.
-    fn append_in_canonical_order(contacts: &mut Vec<Contact>, chained: &mut Vec<Contact>) {
-        chained.sort_unstable_by_key(|contact| contact.key);
-        chained.dedup_by_key(|contact| contact.key);
+    fn append_in_canonical_order(
+        &mut self,
+        ids: &[u32],
+        contacts: &mut Vec<Contact>,
+        chained: &mut Vec<Contact>,
+    ) {
+        order_canonically(chained, ids, &mut self.keyed);
         contacts.extend_from_slice(chained);
     }
 }
 
 impl ContactSchedule {
     /// Keeps in `contacts` the chains with no `pinned` disk (by storage index), in
-    /// resolution order ([`ResolutionOrder::arrange`]), and appends the others to
-    /// `handed_over`. `n_particles` bounds the storage indices.
+    /// resolution order ([`ResolutionOrder::arrange`], by the ids `ids`), and appends the
+    /// others to `handed_over`.
     ///
     /// A lone pair (no disk shared with another pair) is a chain of its own, decided by
     /// its two disks; only the pairs that share disks, a small part of a step's, go
     /// through the union–find.
     pub fn split(
         &mut self,
-        n_particles: usize,
+        ids: &[u32],
         contacts: &mut Vec<Contact>,
         handed_over: &mut Vec<Contact>,
         pinned: impl Fn(u32) -> bool,
     ) {
+        let n_particles = ids.len();
         let mut chained = self.order.set_apart_chained(n_particles, contacts);
         contacts.retain(|contact| {
             let keep = !pinned(contact.a) && !pinned(contact.b);
@@ -182,7 +189,8 @@ impl ContactSchedule {
             keep
         });
         self.split_chained(n_particles, &mut chained, handed_over, &pinned);
-        ResolutionOrder::append_in_canonical_order(contacts, &mut chained);
+        self.order
+            .append_in_canonical_order(ids, contacts, &mut chained);
         self.order.chained = chained;
     }
 
@@ -243,11 +251,12 @@ mod tests {
     use super::*;
 
     fn contact(a: u32, b: u32) -> Contact {
-        Contact {
-            key: (u64::from(a.min(b)) << 32) | u64::from(a.max(b)),
-            a,
-            b,
-        }
+        Contact { a, b }
+    }
+
+    /// Ids equal to the storage indices below `n`.
+    fn ids(n: u32) -> Vec<u32> {
+        (0..n).collect()
     }
 
     #[test]
@@ -268,7 +277,7 @@ mod tests {
         // 0–1 is a chain of its own; 2–3, 3–4 and 5–4 form one chain, pinned through 5.
         let mut contacts = vec![contact(0, 1), contact(2, 3), contact(3, 4), contact(5, 4)];
         let mut handed_over = Vec::new();
-        ContactSchedule::default().split(6, &mut contacts, &mut handed_over, |d| d == 5);
+        ContactSchedule::default().split(&ids(6), &mut contacts, &mut handed_over, |d| d == 5);
         assert_eq!(contacts, vec![contact(0, 1)]);
         assert_eq!(
             handed_over,
@@ -291,12 +300,13 @@ mod tests {
         };
         for round in 0..200 {
             let n = 6 + next(60);
+            let id_of = ids(n);
             let mut contacts: Vec<Contact> = (0..next(40))
                 .map(|_| (next(n), next(n)))
                 .filter(|(a, b)| a != b)
                 .map(|(a, b)| contact(a, b))
                 .collect();
-            contacts.dedup_by_key(|c| c.key);
+            contacts.dedup_by_key(|c| c.key(&id_of));
             let pinned: Vec<bool> = (0..n).map(|_| next(8) == 0).collect();
             // Reference: chain labels by repeated relaxation to the smallest disk.
             let mut label: Vec<u32> = (0..n).collect();
@@ -321,20 +331,18 @@ mod tests {
                 .copied()
                 .filter(|c| !chain_pinned(c))
                 .collect();
-            ResolutionOrder::default().arrange(n as usize, &mut expected_kept);
+            ResolutionOrder::default().arrange(&id_of, &mut expected_kept);
             let mut expected_handed: Vec<u64> = contacts
                 .iter()
                 .filter(|c| chain_pinned(c))
-                .map(|c| c.key)
+                .map(|c| c.key(&id_of))
                 .collect();
             expected_handed.sort_unstable();
 
             let mut kept = contacts.clone();
             let mut handed_over = Vec::new();
-            schedule.split(n as usize, &mut kept, &mut handed_over, |d| {
-                pinned[d as usize]
-            });
-            let mut handed: Vec<u64> = handed_over.iter().map(|c| c.key).collect();
+            schedule.split(&id_of, &mut kept, &mut handed_over, |d| pinned[d as usize]);
+            let mut handed: Vec<u64> = handed_over.iter().map(|c| c.key(&id_of)).collect();
             handed.sort_unstable();
             assert_eq!(kept, expected_kept, "round {round}");
             assert_eq!(handed, expected_handed, "round {round}");
@@ -345,7 +353,7 @@ mod tests {
     fn a_long_chain_pinned_at_its_far_end_is_handed_over_whole() {
         let mut contacts: Vec<Contact> = (0..10).map(|i| contact(i, i + 1)).collect();
         let mut handed_over = Vec::new();
-        ContactSchedule::default().split(11, &mut contacts, &mut handed_over, |d| d == 10);
+        ContactSchedule::default().split(&ids(11), &mut contacts, &mut handed_over, |d| d == 10);
         assert!(contacts.is_empty());
         assert_eq!(handed_over.len(), 10);
     }
@@ -363,7 +371,7 @@ mod tests {
             contact(0, 1),
             contact(7, 6),
         ];
-        order.arrange(10, &mut contacts);
+        order.arrange(&ids(10), &mut contacts);
         assert_eq!(
             contacts,
             vec![
@@ -376,7 +384,7 @@ mod tests {
         );
         assert!(order.holdings.is_empty());
         let mut next = vec![contact(3, 5), contact(1, 0)];
-        order.arrange(10, &mut next);
+        order.arrange(&ids(10), &mut next);
         assert_eq!(next, vec![contact(3, 5), contact(1, 0)]);
     }
 
@@ -392,7 +400,7 @@ mod tests {
             contact(64, 30),
             contact(96, 127),
         ];
-        order.arrange(128, &mut contacts);
+        order.arrange(&ids(128), &mut contacts);
         assert_eq!(
             contacts,
             vec![
@@ -411,11 +419,11 @@ mod tests {
         let mut schedule = ContactSchedule::default();
         let mut handed_over = Vec::new();
         let mut first = vec![contact(0, 1)];
-        schedule.split(3, &mut first, &mut handed_over, |d| d == 1);
+        schedule.split(&ids(3), &mut first, &mut handed_over, |d| d == 1);
         assert_eq!(handed_over.len(), 1);
         let mut second = vec![contact(1, 2)];
         handed_over.clear();
-        schedule.split(3, &mut second, &mut handed_over, |_| false);
+        schedule.split(&ids(3), &mut second, &mut handed_over, |_| false);
         assert_eq!(second, vec![contact(1, 2)]);
         assert!(handed_over.is_empty());
     }

@@ -187,7 +187,7 @@ impl Stepper {
         // The result of resolution must not depend on how pairs were found: lone pairs
         // commute with every other, the rest go in canonical order. A pair of an escapee
         // may have been found twice (see `find_contacts_listed`): kept once.
-        self.order.arrange(particles.len(), &mut self.contacts);
+        self.order.arrange(&particles.id, &mut self.contacts);
     }
 
     /// The overlapping pairs from the neighbour list, rebuilt when it is stale. Disks
@@ -242,18 +242,27 @@ impl Stepper {
 
     /// Resolves the found pairs ([`resolve_contacts`]).
     pub fn resolve_contacts(&mut self, particles: &mut Particles) {
-        self.resolve_contacts_noting(particles, |_| {});
+        self.resolve_calling(particles, |_| {});
     }
 
-    /// [`Stepper::resolve_contacts`], calling `collided` with the key
+    /// [`Stepper::resolve_contacts`], then calls `collided` with the key
     /// ([`Contact::key`]) of every pair that received an impulse of the first pass: the
     /// accuracy observer (`sim::observe::MissedCollisions`) compares them with the pairs
     /// that met.
     pub fn resolve_contacts_noting(
         &mut self,
         particles: &mut Particles,
-        collided: impl FnMut(u64),
+        mut collided: impl FnMut(u64),
     ) {
+        let mut impulsed = Vec::new();
+        self.resolve_calling(particles, |contact| impulsed.push(*contact));
+        for contact in &impulsed {
+            collided(contact.key(&particles.id));
+        }
+    }
+
+    /// [`resolve_contacts`] of the found pairs, calling `collided` as it does.
+    fn resolve_calling(&mut self, particles: &mut Particles, collided: impl FnMut(&Contact)) {
         resolve_contacts(
             particles,
             &self.domain,
