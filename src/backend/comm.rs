@@ -1,4 +1,4 @@
-//! The two collectives the distributed backend needs, behind a small trait: MPI
+//! The collectives the distributed backend needs, behind a small trait: MPI
 //! implements it (feature `mpi`), and so do threads in one process, which lets the
 //! domain decomposition be tested on machines without MPI.
 
@@ -14,6 +14,8 @@ pub trait Communicator {
     fn exchange(&self, outgoing: &[Vec<f64>]) -> Vec<Vec<f64>>;
     /// Every rank's `data`, indexed by rank, on every rank.
     fn all_gather(&self, data: &[f64]) -> Vec<Vec<f64>>;
+    /// Returns once every rank has called it.
+    fn barrier(&self);
 }
 
 /// Ranks as threads of one process, meeting at a barrier: for tests and for machines
@@ -83,5 +85,9 @@ impl Communicator for ThreadComm {
 
     fn all_gather(&self, data: &[f64]) -> Vec<Vec<f64>> {
         self.exchange(&vec![data.to_vec(); self.size])
+    }
+
+    fn barrier(&self) {
+        self.shared.barrier.wait();
     }
 }

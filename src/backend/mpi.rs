@@ -78,6 +78,10 @@ impl Communicator for MpiComm {
         self.world.size() as usize
     }
 
+    fn barrier(&self) {
+        self.world.barrier();
+    }
+
     fn exchange(&self, outgoing: &[Vec<f64>]) -> Vec<Vec<f64>> {
         let send_counts: Vec<Count> = outgoing.iter().map(|buffer| count_of(buffer)).collect();
         let mut recv_counts = vec![0; self.size()];
