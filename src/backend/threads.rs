@@ -29,7 +29,7 @@ use crate::sim::grid::{
 };
 use crate::sim::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin, round_positions};
 use crate::sim::observe::observe;
-use crate::sim::particles::gather;
+use crate::sim::particles::{gather, label_in_place};
 use crate::sim::prefetch::prefetch;
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::{ContactSchedule, DiskSet};
@@ -391,11 +391,8 @@ impl ThreadedStepper {
         if self.reorder.count_build() {
             // The lists are rebuilt next: freed first, as the serial stepper does.
             self.lists.iter_mut().for_each(PairList::release);
-            self.grid.store_in_grid_order_with(
-                particles,
-                gather_in_parallel::<f64>,
-                gather_in_parallel::<u32>,
-            );
+            self.grid
+                .store_in_grid_order_with(particles, gather_in_parallel, label_in_parallel);
         }
         bands
     }
@@ -481,10 +478,17 @@ impl ThreadedStepper {
 }
 
 /// [`gather`] in parallel chunks of [`MIN_CHUNK`].
-fn gather_in_parallel<T: Copy + Send + Sync>(values: &[T], order: &[u32], into: &mut [T]) {
+fn gather_in_parallel(values: &[f64], order: &[u32], into: &mut [f64]) {
     into.par_chunks_mut(MIN_CHUNK)
         .zip(order.par_chunks(MIN_CHUNK))
         .for_each(|(into, order)| gather(values, order, into));
+}
+
+/// [`label_in_place`] in parallel chunks of [`MIN_CHUNK`].
+fn label_in_parallel(ids: &[u32], slots: &mut [u32]) {
+    slots
+        .par_chunks_mut(MIN_CHUNK)
+        .for_each(|slots| label_in_place(ids, slots));
 }
 
 /// Cuts the owned strips (global index 0 first) into the given bands, each with the

@@ -6,7 +6,7 @@
 
 use std::ops::{Range, RangeInclusive};
 
-use super::particles::{Particles, gather};
+use super::particles::{Particles, gather, label_in_place};
 use super::scene::{Boundary, Domain, minimum_image};
 
 /// An overlapping pair: the storage indices of its two disks, in either order. Every
@@ -300,26 +300,23 @@ impl StripGrid {
     /// grid order (strip, then x), and points the entries to their new slots. Results do
     /// not change: pair order and sums go by id, not storage.
     pub fn store_in_grid_order(&mut self, particles: &mut Particles) {
-        self.store_in_grid_order_with(particles, gather, gather);
+        self.store_in_grid_order_with(particles, gather, label_in_place);
     }
 
-    /// [`StripGrid::store_in_grid_order`], each array gathered into the new order by
-    /// `floats` or `ids` (as [`gather`] does it, in one piece or in pieces: a parallel
-    /// backend's).
+    /// [`StripGrid::store_in_grid_order`], the arrays gathered into the new order by
+    /// `floats` and `ids` ([`Particles::gather_arrays`]: in one piece or in pieces, a
+    /// parallel backend's).
     pub fn store_in_grid_order_with(
         &mut self,
         particles: &mut Particles,
-        mut floats: impl FnMut(&[f64], &[u32], &mut [f64]),
-        ids: impl FnOnce(&[u32], &[u32], &mut [u32]),
+        floats: impl FnMut(&[f64], &[u32], &mut [f64]),
+        ids: impl FnOnce(&[u32], &mut [u32]),
     ) {
         let mut order = Vec::with_capacity(self.len());
         for strip in &self.strips[..self.n_owned] {
             order.extend(strip.iter().map(|entry| entry.idx));
         }
-        particles.gather_arrays(
-            |values, into| floats(values, &order, into),
-            |values, into| ids(values, &order, into),
-        );
+        particles.gather_arrays(order, floats, ids);
         let mut first_slot = 0;
         for strip in &mut self.strips[..self.n_owned] {
             number_slots(strip, first_slot);

@@ -261,6 +261,14 @@ pub fn gather<T: Copy>(values: &[T], order: &[u32], into: &mut [T]) {
     }
 }
 
+/// Replaces each storage index in `slots` with the id of the disk stored there: the ids
+/// in a new order, [`gather`] done in place into the order itself.
+pub fn label_in_place(ids: &[u32], slots: &mut [u32]) {
+    for slot in slots {
+        *slot = ids[*slot as usize];
+    }
+}
+
 /// Values per disk in a packed buffer ([`Particles::pack`]).
 pub const PACKED_LEN: usize = 7;
 
@@ -418,33 +426,34 @@ impl Particles {
     /// Stores the disks in a new order: `new_order` lists old storage indices, each once.
     pub fn reorder(&mut self, new_order: &[u32]) {
         debug_assert_eq!(new_order.len(), self.len());
-        self.gather_arrays(
-            |values, into| gather(values, new_order, into),
-            |ids, into| gather(ids, new_order, into),
-        );
+        self.gather_arrays(new_order.to_vec(), gather, label_in_place);
     }
 
-    /// Replaces every array with a new one, as long, that `floats` (for the f64 arrays,
-    /// and the properties held one per disk) or `ids` fills from it: a reordering. The
-    /// f64 arrays pass one spare array from one to the next (each filled into it, then
-    /// swapped with it): a re-storing takes fresh memory for one array, not for each.
+    /// Stores the disks in the new `order` (old storage indices, each once): every f64
+    /// array (and property held one per disk) is replaced by one that `floats` fills from
+    /// it and the order, as [`gather`] does; the order itself becomes the ids, `ids`
+    /// turning each index into the id stored there, as [`label_in_place`] does. The f64
+    /// arrays pass one spare array from one to the next (each filled into it, then
+    /// swapped with it): a re-storing takes fresh memory for one array only, not for
+    /// each, nor for the ids.
     pub fn gather_arrays(
         &mut self,
-        mut floats: impl FnMut(&[f64], &mut [f64]),
+        mut order: Vec<u32>,
+        mut floats: impl FnMut(&[f64], &[u32], &mut [f64]),
         ids: impl FnOnce(&[u32], &mut [u32]),
     ) {
         let n = self.len();
-        let mut new_ids = vec![0; n];
-        ids(&self.id, &mut new_ids);
-        self.id = new_ids;
+        assert_eq!(order.len(), n, "an order of every disk");
         let mut spare = vec![0.0; n];
         let mut replace = |values: &mut Vec<f64>| {
-            floats(values, &mut spare);
+            floats(values, &order, &mut spare);
             std::mem::swap(values, &mut spare);
         };
         self.motion_arrays_mut().into_iter().for_each(&mut replace);
         let properties = self.properties_mut().into_iter();
         properties.filter_map(PerDisk::values_mut).for_each(replace);
+        ids(&self.id, &mut order);
+        self.id = order;
     }
 
     /// The positions and velocities in packing order: x, y, vx, vy. With `id` and
