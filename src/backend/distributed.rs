@@ -455,9 +455,11 @@ impl RankState {
         receive_band(self.grid.owned_strips_mut(), self.slab.start, &[&arrived]);
 
         if self.reorder.count_build() {
-            // The list is rebuilt next: freed first, as the serial stepper does.
-            self.list.release();
-            self.grid.store_in_grid_order(&mut self.particles);
+            // The list is rebuilt next: it lends its memory, as the serial stepper's does.
+            let (grid, particles) = (&mut self.grid, &mut self.particles);
+            self.list.with_reorder_scratch(particles.len(), |scratch| {
+                grid.store_in_grid_order(particles, scratch);
+            });
         }
     }
 

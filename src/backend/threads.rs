@@ -389,10 +389,22 @@ impl ThreadedStepper {
             .par_iter_mut()
             .for_each(|(first, band)| receive_band(band, *first, &movers));
         if self.reorder.count_build() {
-            // The lists are rebuilt next: freed first, as the serial stepper does.
-            self.lists.iter_mut().for_each(PairList::release);
-            self.grid
-                .store_in_grid_order_with(particles, gather_in_parallel, label_in_parallel);
+            // The lists are rebuilt next: freed, but the first, which the re-storing
+            // works in as the serial stepper's does.
+            if self.lists.is_empty() {
+                self.lists.push(PairList::default());
+            }
+            let (first, others) = self.lists.split_at_mut(1);
+            others.iter_mut().for_each(PairList::release);
+            let grid = &mut self.grid;
+            first[0].with_reorder_scratch(particles.len(), |scratch| {
+                grid.store_in_grid_order_with(
+                    particles,
+                    scratch,
+                    gather_in_parallel,
+                    label_in_parallel,
+                );
+            });
         }
         bands
     }

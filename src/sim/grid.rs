@@ -6,7 +6,7 @@
 
 use std::ops::{Range, RangeInclusive};
 
-use super::particles::{Particles, gather, label_in_place};
+use super::particles::{Particles, ReorderScratch, gather, label_in_place};
 use super::scene::{Boundary, Domain, minimum_image};
 
 /// An overlapping pair: the storage indices of its two disks, in either order. Every
@@ -297,10 +297,10 @@ impl StripGrid {
     }
 
     /// Re-stores `particles` (the disks of the owned strips, as of the last build) in
-    /// grid order (strip, then x), and points the entries to their new slots. Results do
-    /// not change: pair order and sums go by id, not storage.
-    pub fn store_in_grid_order(&mut self, particles: &mut Particles) {
-        self.store_in_grid_order_with(particles, gather, label_in_place);
+    /// grid order (strip, then x), working in `scratch`, and points the entries to their
+    /// new slots. Results do not change: pair order and sums go by id, not storage.
+    pub fn store_in_grid_order(&mut self, particles: &mut Particles, scratch: ReorderScratch<'_>) {
+        self.store_in_grid_order_with(particles, scratch, gather, label_in_place);
     }
 
     /// [`StripGrid::store_in_grid_order`], the arrays gathered into the new order by
@@ -309,14 +309,16 @@ impl StripGrid {
     pub fn store_in_grid_order_with(
         &mut self,
         particles: &mut Particles,
+        scratch: ReorderScratch<'_>,
         floats: impl FnMut(&[f64], &[u32], &mut [f64]),
         ids: impl FnOnce(&[u32], &mut [u32]),
     ) {
-        let mut order = Vec::with_capacity(self.len());
-        for strip in &self.strips[..self.n_owned] {
-            order.extend(strip.iter().map(|entry| entry.idx));
+        assert_eq!(scratch.order.len(), self.len(), "an order of every disk");
+        let entries = self.strips[..self.n_owned].iter().flatten();
+        for (slot, entry) in scratch.order.iter_mut().zip(entries) {
+            *slot = entry.idx;
         }
-        particles.gather_arrays(order, floats, ids);
+        particles.gather_arrays(scratch, floats, ids);
         let mut first_slot = 0;
         for strip in &mut self.strips[..self.n_owned] {
             number_slots(strip, first_slot);

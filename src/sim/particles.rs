@@ -269,6 +269,14 @@ pub fn label_in_place(ids: &[u32], slots: &mut [u32]) {
     }
 }
 
+/// Borrowed memory a re-storing works in ([`Particles::gather_arrays`]): the new order,
+/// and room for one array of values, each as long as the disks.
+#[derive(Debug)]
+pub struct ReorderScratch<'a> {
+    pub order: &'a mut [u32],
+    pub spare: &'a mut [f64],
+}
+
 /// Values per disk in a packed buffer ([`Particles::pack`]).
 pub const PACKED_LEN: usize = 7;
 
@@ -426,46 +434,74 @@ impl Particles {
     /// Stores the disks in a new order: `new_order` lists old storage indices, each once.
     pub fn reorder(&mut self, new_order: &[u32]) {
         debug_assert_eq!(new_order.len(), self.len());
-        self.gather_arrays(new_order.to_vec(), gather, label_in_place);
+        let mut spare = vec![0.0; self.len()];
+        let scratch = ReorderScratch {
+            order: &mut new_order.to_vec(),
+            spare: &mut spare,
+        };
+        self.gather_arrays(scratch, gather, label_in_place);
     }
 
-    /// Stores the disks in the new `order` (old storage indices, each once): every f64
-    /// array (and property held one per disk) is replaced by one that `floats` fills from
-    /// it and the order, as [`gather`] does; the order itself becomes the ids, `ids`
-    /// turning each index into the id stored there, as [`label_in_place`] does. The f64
-    /// arrays pass one spare array from one to the next (each filled into it, then
-    /// swapped with it): a re-storing takes fresh memory for one array only, not for
-    /// each, nor for the ids.
+    /// Stores the disks in the new order `scratch.order` (old storage indices, each
+    /// once), without taking memory: every f64 array (and property held one per disk)
+    /// is gathered by `floats`, as [`gather`] does, into a buffer whose values were
+    /// already gathered (the first into `scratch.spare`, which is copied into the last
+    /// freed buffer at the end); the order is turned into the ids by `ids`, as
+    /// [`label_in_place`] does, and copied over them. Both scratch slices are left
+    /// holding values of no use.
     pub fn gather_arrays(
         &mut self,
-        mut order: Vec<u32>,
+        scratch: ReorderScratch<'_>,
         mut floats: impl FnMut(&[f64], &[u32], &mut [f64]),
         ids: impl FnOnce(&[u32], &mut [u32]),
     ) {
+        let ReorderScratch { order, spare } = scratch;
         let n = self.len();
         assert_eq!(order.len(), n, "an order of every disk");
-        let mut spare = vec![0.0; n];
-        let mut replace = |values: &mut Vec<f64>| {
-            floats(values, &order, &mut spare);
-            std::mem::swap(values, &mut spare);
-        };
-        self.motion_arrays_mut().into_iter().for_each(&mut replace);
-        let properties = self.properties_mut().into_iter();
-        properties.filter_map(PerDisk::values_mut).for_each(replace);
-        ids(&self.id, &mut order);
-        self.id = order;
+        assert_eq!(spare.len(), n, "a spare array of one value per disk");
+        {
+            let (motion, properties) = self.arrays_mut();
+            let per_disk = properties.into_iter().filter_map(PerDisk::values_mut);
+            let mut arrays = motion.into_iter().chain(per_disk);
+            if let Some(first) = arrays.next() {
+                floats(first, order, spare);
+                // The first array's values are gathered: each next array goes into its
+                // buffer and hands over its own, which the first then holds.
+                for values in arrays {
+                    floats(values, order, first);
+                    std::mem::swap(first, values);
+                }
+                first.copy_from_slice(spare);
+            }
+        }
+        ids(&self.id, order);
+        self.id.copy_from_slice(order);
     }
 
-    /// The positions and velocities in packing order: x, y, vx, vy. With `id` and
-    /// [`Particles::properties_mut`], the one place that lists the arrays, for
-    /// operations that treat them all alike.
+    /// The positions and velocities (x, y, vx, vy) and the properties (radius, mass), in
+    /// packing order. With `id`, the one place that lists the arrays, for operations that
+    /// treat them all alike.
+    fn arrays_mut(&mut self) -> ([&mut Vec<f64>; 4], [&mut PerDisk; 2]) {
+        let Particles {
+            id: _,
+            x,
+            y,
+            vx,
+            vy,
+            radius,
+            mass,
+        } = self;
+        ([x, y, vx, vy], [radius, mass])
+    }
+
+    /// The positions and velocities in packing order ([`Particles::arrays_mut`]).
     fn motion_arrays_mut(&mut self) -> [&mut Vec<f64>; 4] {
-        [&mut self.x, &mut self.y, &mut self.vx, &mut self.vy]
+        self.arrays_mut().0
     }
 
-    /// The properties in packing order: radius, mass.
+    /// The properties in packing order ([`Particles::arrays_mut`]).
     fn properties_mut(&mut self) -> [&mut PerDisk; 2] {
-        [&mut self.radius, &mut self.mass]
+        self.arrays_mut().1
     }
 
     /// Appends the disk stored at `idx` to `out` as [`PACKED_LEN`] values: id, x, y, vx,

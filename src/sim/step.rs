@@ -228,11 +228,13 @@ impl Stepper {
     fn rebuild_list(&mut self, particles: &mut Particles) {
         self.grid.build(particles);
         if self.reorder.count_build() {
-            // Storing disks in grid order keeps the next builds' reads sequential. The
-            // list, rebuilt below, is freed first: the re-storing's new arrays take its
-            // memory instead of adding to the peak.
-            self.neighbours.release();
-            self.grid.store_in_grid_order(particles);
+            // Storing disks in grid order keeps the next builds' reads sequential. It
+            // works in the memory of the list, rebuilt below.
+            let grid = &mut self.grid;
+            self.neighbours
+                .with_reorder_scratch(particles.len(), |scratch| {
+                    grid.store_in_grid_order(particles, scratch);
+                });
         }
         let strips = self.grid.owned();
         self.neighbours
