@@ -27,6 +27,7 @@ use criterion::{BenchmarkId, Criterion, Throughput, criterion_group};
 
 use collide::backend::comm::ThreadComm;
 use collide::backend::distributed;
+use collide::backend::team::with_team;
 use collide::backend::threads::ThreadedStepper;
 use collide::run::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
 use collide::sim::event::{EventParams, EventSim};
@@ -145,12 +146,25 @@ fn backend_steps(c: &mut Criterion) {
         let mut particles = scene.particles.clone();
         let mut threaded = ThreadedStepper::new(scene.domain, scene.physics, PARAMS, &particles, 2);
         pool.install(|| {
-            for _ in 0..WARM_UP_STEPS {
-                threaded.step(&mut particles);
-            }
+            with_team(|team| {
+                for _ in 0..WARM_UP_STEPS {
+                    threaded.step(&mut particles, team);
+                }
+            })
         });
+        // One team for each batch of steps, as `collide simulate` has one for its run.
         group.bench_function(BenchmarkId::new("rayon_2_threads", packing), |b| {
-            b.iter(|| pool.install(|| threaded.step(&mut particles)));
+            b.iter_custom(|steps| {
+                pool.install(|| {
+                    with_team(|team| {
+                        let start = Instant::now();
+                        for _ in 0..steps {
+                            threaded.step(&mut particles, team);
+                        }
+                        start.elapsed()
+                    })
+                })
+            });
         });
     }
     group.finish();

@@ -1,5 +1,7 @@
 //! The rayon backend: the serial reference's stages split over bands of strips, on a
 //! thread pool of exactly the requested size built for the run, giving the serial bits.
+//! The pool's threads work as one [`Team`] for the whole run (`backend::team`: why not
+//! rayon's parallel iterators).
 //!
 //! Per step: disks move in parallel chunks; the grid is refreshed band by band (each
 //! band re-sorts its strips and hands disks that changed strip to the band that now
@@ -13,8 +15,7 @@ use std::num::NonZeroUsize;
 use std::ops::{ControlFlow, Range};
 use std::time::Instant;
 
-use rayon::prelude::*;
-
+use crate::backend::team::{Team, with_team};
 use crate::backend::{
     Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
     summarize, timed,
@@ -57,6 +58,18 @@ pub fn pool(threads: NonZeroUsize) -> Result<rayon::ThreadPool, BackendError> {
 pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendError> {
     let setup_start = Instant::now();
     let pool = pool(threads)?;
+    // The team forms before the set-up, so that its members wait for the first step
+    // awake, as they wait between phases (`backend::team`).
+    pool.install(|| with_team(|team| run_on(team, spec, threads, setup_start)))
+}
+
+/// [`run`] on a team of the pool, the set-up timed from `setup_start`.
+fn run_on(
+    team: &Team<'_>,
+    spec: &RunSpec,
+    threads: NonZeroUsize,
+    setup_start: Instant,
+) -> Result<RunOutcome, BackendError> {
     let mut prepared = spec.prepare()?;
     let mut particles = prepared.take_particles();
     let scene = &prepared.scene;
@@ -71,13 +84,11 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
     let initial = observe(&particles);
     let mut offscreen = Offscreen::when(spec.method.draw, &prepared.scene.domain, &particles);
 
-    let seconds = pool.install(|| {
-        step_loop(prepared.steps, spec.slowdown, CpuScope::Process, |_| {
-            stepper.step(&mut particles);
-            // The snapshot and the rasterizer are serial: drawing runs on this thread.
-            draw_step(&mut offscreen, &particles);
-            ControlFlow::Continue(())
-        })
+    let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Process, |_| {
+        stepper.step(&mut particles, team);
+        // The snapshot and the rasterizer are serial: drawing runs on this thread.
+        draw_step(&mut offscreen, &particles);
+        ControlFlow::Continue(())
     });
 
     // Drawing is out of both clocks: its own seconds (CPU the pool's waiting threads
@@ -106,8 +117,8 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
     })
 }
 
-/// The serial stepper's stages, each split over bands of strips. Run it inside the
-/// pool that should execute it (`ThreadPool::install`).
+/// The serial stepper's stages, each split over bands of strips and run by a [`Team`]
+/// of the pool that should execute it (`ThreadPool::install`, then [`with_team`]).
 #[derive(Debug)]
 pub struct ThreadedStepper {
     domain: Domain,
@@ -173,15 +184,19 @@ impl ThreadedStepper {
     }
 
     /// One full step, the same as [`crate::sim::Stepper::step`] bit for bit.
-    pub fn step(&mut self, particles: &mut Particles) {
+    pub fn step(&mut self, particles: &mut Particles, team: &Team<'_>) {
         let mut stages = self.stages;
-        timed(&mut stages.integration, || self.advance(particles));
-        timed(&mut stages.broad_phase, || self.find_contacts(particles));
-        timed(&mut stages.collisions, || self.resolve_contacts(particles));
+        timed(&mut stages.integration, || self.advance(particles, team));
+        timed(&mut stages.broad_phase, || {
+            self.find_contacts(particles, team)
+        });
+        timed(&mut stages.collisions, || {
+            self.resolve_contacts(particles, team)
+        });
         self.stages = stages;
     }
 
-    fn advance(&mut self, particles: &mut Particles) {
+    fn advance(&mut self, particles: &mut Particles, team: &Team<'_>) {
         let (domain, physics, dt) = (&self.domain, &self.physics, self.params.dt);
         let chunk = self.chunk(particles.len());
         let n_chunks = particles.len().div_ceil(chunk);
@@ -196,34 +211,25 @@ impl ThreadedStepper {
             vy,
             radius,
         } = particles.disk_slices_mut();
-        let walls = x
-            .par_chunks_mut(chunk)
-            .zip(y.par_chunks_mut(chunk))
-            .zip(vx.par_chunks_mut(chunk))
-            .zip(vy.par_chunks_mut(chunk))
-            .zip(radius.chunks(chunk).collect::<Vec<_>>())
-            .zip(displacements)
-            .map(|(((((x, y), vx), vy), radius), displacements)| {
-                advance_disks(
-                    domain,
-                    physics,
-                    dt,
-                    DiskSlices {
-                        x,
-                        y,
-                        vx,
-                        vy,
-                        radius,
-                    },
-                    displacements,
-                )
+        let chunks = x
+            .chunks_mut(chunk)
+            .zip(y.chunks_mut(chunk))
+            .zip(vx.chunks_mut(chunk))
+            .zip(vy.chunks_mut(chunk))
+            .zip(radius.chunks(chunk))
+            .map(|((((x, y), vx), vy), radius)| DiskSlices {
+                x,
+                y,
+                vx,
+                vy,
+                radius,
             })
-            // Counts and maxima only: the same totals in any order.
-            .reduce(StepCounters::default, |mut a, b| {
-                a.merge(&b);
-                a
-            });
-        self.counters.merge(&walls);
+            .zip(displacements);
+        let walls = team.map(chunks, |(disks, displacements)| {
+            advance_disks(domain, physics, dt, disks, displacements)
+        });
+        // Counts and maxima only: the same totals in any order.
+        walls.iter().for_each(|walls| self.counters.merge(walls));
     }
 
     /// Disks per parallel chunk of the per-disk stages: whole blocks of the lists'
@@ -235,11 +241,11 @@ impl ThreadedStepper {
             .next_multiple_of(DISPLACEMENT_BLOCK)
     }
 
-    fn find_contacts(&mut self, particles: &mut Particles) {
+    fn find_contacts(&mut self, particles: &mut Particles, team: &Team<'_>) {
         self.crossing.clear();
         match self.params.broadphase {
             Broadphase::Grid => {
-                let escaped = self.contacts_of_escapees(particles);
+                let escaped = self.contacts_of_escapees(particles, team);
                 let n_lists = self.lists.len();
                 self.contacts.resize_with(n_lists, Vec::new);
                 self.handed_over.resize_with(n_lists, Vec::new);
@@ -251,24 +257,29 @@ impl ThreadedStepper {
                 let (in_first_strips, touched) = (&self.in_first_strips, &self.touched);
                 let pinned = |disk: u32| in_first_strips.contains(disk) || touched[disk as usize];
                 let (domain, particles) = (&self.domain, &*particles);
-                self.lists
-                    .par_iter()
-                    .zip(self.contacts.par_iter_mut())
-                    .zip(self.handed_over.par_iter_mut())
-                    .zip(self.schedules.par_iter_mut())
-                    .for_each(|(((list, band_contacts), band_handed_over), schedule)| {
+                let mut bands: Vec<_> = self
+                    .lists
+                    .iter()
+                    .zip(&mut self.contacts)
+                    .zip(&mut self.handed_over)
+                    .zip(&mut self.schedules)
+                    .collect();
+                team.for_each(
+                    &mut bands,
+                    |(((list, band_contacts), band_handed_over), schedule)| {
                         // Filled as locals: the lengths of the bands' vectors share cache
                         // lines, and each push would bounce them between threads.
-                        let mut contacts = std::mem::take(band_contacts);
-                        let mut handed_over = std::mem::take(band_handed_over);
+                        let mut contacts = std::mem::take(*band_contacts);
+                        let mut handed_over = std::mem::take(*band_handed_over);
                         contacts.clear();
                         handed_over.clear();
                         list.find_contacts(particles, domain, &mut contacts);
                         // Split while the pairs are in list order, close in memory.
                         schedule.split(&particles.id, &mut contacts, &mut handed_over, pinned);
-                        *band_contacts = contacts;
-                        *band_handed_over = handed_over;
-                    });
+                        **band_contacts = contacts;
+                        **band_handed_over = handed_over;
+                    },
+                );
                 self.crossing.extend(self.handed_over.iter().flatten());
                 self.crossing.extend_from_slice(&escaped);
                 // An escapee's pair may also be listed: kept once.
@@ -278,7 +289,7 @@ impl ThreadedStepper {
                     self.touched[contact.b as usize] = false;
                 }
             }
-            Broadphase::AllPairs => self.find_all_pairs(particles),
+            Broadphase::AllPairs => self.find_all_pairs(particles, team),
         }
     }
 
@@ -286,7 +297,7 @@ impl ThreadedStepper {
     /// the pairs of the disks that escaped them (queries in parallel chunks) and marks
     /// both disks of each in `touched`: their chains go to the crossing list. Returns
     /// those pairs.
-    fn contacts_of_escapees(&mut self, particles: &mut Particles) -> Vec<Contact> {
+    fn contacts_of_escapees(&mut self, particles: &mut Particles, team: &Team<'_>) -> Vec<Contact> {
         let n = particles.len();
         self.touched.resize(n, false);
         let largest_sq = self.skin.largest_displacement_sq(particles, &self.domain);
@@ -300,19 +311,16 @@ impl ThreadedStepper {
             skin.escapees(0..n, &mut escapees);
         }
         if escapees.is_empty() || !skin.may_patch(escapees.len(), n, largest_sq) {
-            self.rebuild_lists(particles);
+            self.rebuild_lists(particles, team);
             return Vec::new();
         }
         let grid = &self.grid;
         let moved = largest_sq.sqrt();
-        let found: Vec<Vec<Contact>> = escapees
-            .par_chunks(256)
-            .map(|movers| {
-                let mut contacts = Vec::new();
-                grid.find_contacts_of(movers, moved, now, domain, &mut contacts);
-                contacts
-            })
-            .collect();
+        let found = team.map(escapees.chunks(256), |movers| {
+            let mut contacts = Vec::new();
+            grid.find_contacts_of(movers, moved, now, domain, &mut contacts);
+            contacts
+        });
         let escaped = found.concat();
         for contact in &escaped {
             self.touched[contact.a as usize] = true;
@@ -323,8 +331,8 @@ impl ThreadedStepper {
 
     /// Rebuilds the grid and, band by band in parallel, the neighbour lists, and records
     /// the positions they were built at.
-    fn rebuild_lists(&mut self, particles: &mut Particles) {
-        let bands = self.build_grid(particles);
+    fn rebuild_lists(&mut self, particles: &mut Particles, team: &Team<'_>) {
+        let bands = self.build_grid(particles, team);
         self.in_first_strips.clear(particles.len());
         for band in bands.iter().filter(|_| bands.len() > 1) {
             for entry in self.grid.strip_entries(band.start) {
@@ -342,19 +350,19 @@ impl ThreadedStepper {
         self.lists.resize_with(bands.len(), PairList::default);
         let (grid, domain, skin, particles_now) =
             (&self.grid, &self.domain, &self.skin, &*particles);
-        self.lists
-            .par_iter_mut()
-            .zip(bands.par_iter())
-            .for_each(|(list, band)| list.rebuild(grid, band.clone(), particles_now, domain, skin));
+        let mut lists: Vec<_> = self.lists.iter_mut().zip(&bands).collect();
+        team.for_each(&mut lists, |(list, band)| {
+            list.rebuild(grid, (*band).clone(), particles_now, domain, skin)
+        });
         self.skin.record_with(particles, |x, y, x_built, y_built| {
-            let pieces = x.par_chunks(MIN_CHUNK).zip(y.par_chunks(MIN_CHUNK));
+            let pieces = x.chunks(MIN_CHUNK).zip(y.chunks(MIN_CHUNK));
             let built = x_built
-                .par_chunks_mut(MIN_CHUNK)
-                .zip(y_built.par_chunks_mut(MIN_CHUNK));
-            pieces
-                .zip(built)
-                .map(|((x, y), (x_built, y_built))| round_positions(x, y, x_built, y_built))
-                .reduce(|| 0.0, f64::max)
+                .chunks_mut(MIN_CHUNK)
+                .zip(y_built.chunks_mut(MIN_CHUNK));
+            let largest = team.map(pieces.zip(built), |((x, y), (x_built, y_built))| {
+                round_positions(x, y, x_built, y_built)
+            });
+            largest.into_iter().fold(0.0, f64::max)
         });
     }
 
@@ -363,7 +371,7 @@ impl ThreadedStepper {
     /// Returns the bands it used, cut by the disk counts before the refresh: the pair
     /// scan uses the same bands. The grid was first built for these disks with the
     /// stepper ([`StripGrid::with_skin`]): every build here is a refresh.
-    fn build_grid(&mut self, particles: &mut Particles) -> Vec<Range<usize>> {
+    fn build_grid(&mut self, particles: &mut Particles, team: &Team<'_>) -> Vec<Range<usize>> {
         assert_eq!(
             self.grid.len(),
             particles.len(),
@@ -374,20 +382,18 @@ impl ThreadedStepper {
         let mut slices = split_into_bands(self.grid.owned_strips_mut(), &bands);
         self.movers.resize_with(bands.len(), Vec::new);
         let now = &*particles;
-        slices
-            .par_iter_mut()
-            .zip(self.movers.par_iter_mut())
-            .for_each(|((first, band), band_movers)| {
-                // A local, for the reason given in `find_contacts`.
-                let mut movers = std::mem::take(band_movers);
-                movers.clear();
-                refresh_band(&layout, band, *first, now, &mut movers);
-                *band_movers = movers;
-            });
+        let mut refreshes: Vec<_> = slices.iter_mut().zip(&mut self.movers).collect();
+        team.for_each(&mut refreshes, |((first, band), band_movers)| {
+            // A local, for the reason given in `find_contacts`.
+            let mut movers = std::mem::take(*band_movers);
+            movers.clear();
+            refresh_band(&layout, band, *first, now, &mut movers);
+            **band_movers = movers;
+        });
         let movers: Vec<&[Mover]> = self.movers.iter().map(Vec::as_slice).collect();
-        slices
-            .par_iter_mut()
-            .for_each(|(first, band)| receive_band(band, *first, &movers));
+        team.for_each(&mut slices, |(first, band)| {
+            receive_band(band, *first, &movers)
+        });
         if self.reorder.count_build() {
             // The lists are rebuilt next: freed, but the first, which the re-storing
             // works in as the serial stepper's does.
@@ -401,8 +407,8 @@ impl ThreadedStepper {
                 grid.store_in_grid_order_with(
                     particles,
                     scratch,
-                    gather_in_parallel,
-                    label_in_parallel,
+                    |values, order, into| gather_in_parallel(team, values, order, into),
+                    |ids, slots| label_in_parallel(team, ids, slots),
                 );
             });
         }
@@ -411,7 +417,7 @@ impl ThreadedStepper {
 
     /// The seed's O(N²) search with its rows split over the pool; the pairs are then
     /// resolved in canonical order by one worker.
-    fn find_all_pairs(&mut self, particles: &Particles) {
+    fn find_all_pairs(&mut self, particles: &Particles, team: &Team<'_>) {
         let n = particles.len();
         // Row i tests n − i − 1 pairs: cut rows so that each piece has the same work.
         let pieces = 8 * self.n_bands;
@@ -419,21 +425,18 @@ impl ThreadedStepper {
             .map(|k| n - ((n as f64) * (1.0 - k as f64 / pieces as f64).sqrt()) as usize)
             .collect();
         let domain = &self.domain;
-        let found: Vec<Vec<Contact>> = cuts
-            .par_windows(2)
-            .map(|cut| {
-                let mut contacts = Vec::new();
-                find_contacts_all_pairs_from(cut[0]..cut[1], particles, domain, &mut contacts);
-                contacts
-            })
-            .collect();
+        let found = team.map(cuts.windows(2), |cut| {
+            let mut contacts = Vec::new();
+            find_contacts_all_pairs_from(cut[0]..cut[1], particles, domain, &mut contacts);
+            contacts
+        });
         self.contacts.resize_with(1, Vec::new);
         self.contacts[0].clear();
         self.contacts[0].extend(found.into_iter().flatten());
         order_canonically(&mut self.contacts[0], &particles.id, &mut self.keyed);
     }
 
-    fn resolve_contacts(&mut self, particles: &mut Particles) {
+    fn resolve_contacts(&mut self, particles: &mut Particles, team: &Team<'_>) {
         let (domain, physics, dt) = (&self.domain, &self.physics, self.params.dt);
         let n_lists = self.contacts.len();
         if n_lists == 1 {
@@ -449,33 +452,30 @@ impl ThreadedStepper {
             );
         } else {
             let shared = SharedDisks::new(particles);
-            let band_counters = self.contacts[..n_lists]
-                .par_iter()
-                .map(|contacts| {
-                    // SAFETY: after `ContactSchedule::split`, a band's list holds only
-                    // whole chains with no disk in any band's first strip. A band's pairs
-                    // touch disks of its own strips and of the next band's first strip,
-                    // so these chains' disks belong to this band's strips and to no other
-                    // band's pairs: two bands never hold contacts of the same disk, and
-                    // resolution touches only the disks of its contacts.
-                    let mut disks = unsafe { shared.claim() };
-                    let mut counters = StepCounters::default();
-                    resolve_contacts(
-                        &mut disks,
-                        domain,
-                        physics,
-                        dt,
-                        contacts,
-                        &mut counters,
-                        |_| {},
-                    );
-                    counters
-                })
-                .reduce(StepCounters::default, |mut a, b| {
-                    a.merge(&b);
-                    a
-                });
-            self.counters.merge(&band_counters);
+            let band_counters = team.map(&self.contacts[..n_lists], |contacts| {
+                // SAFETY: after `ContactSchedule::split`, a band's list holds only
+                // whole chains with no disk in any band's first strip. A band's pairs
+                // touch disks of its own strips and of the next band's first strip,
+                // so these chains' disks belong to this band's strips and to no other
+                // band's pairs: two bands never hold contacts of the same disk, and
+                // resolution touches only the disks of its contacts.
+                let mut disks = unsafe { shared.claim() };
+                let mut counters = StepCounters::default();
+                resolve_contacts(
+                    &mut disks,
+                    domain,
+                    physics,
+                    dt,
+                    contacts,
+                    &mut counters,
+                    |_| {},
+                );
+                counters
+            });
+            // Summed in band order, whichever thread resolved which band, then added.
+            let mut bands = StepCounters::default();
+            band_counters.iter().for_each(|band| bands.merge(band));
+            self.counters.merge(&bands);
         }
         resolve_contacts(
             particles,
@@ -489,18 +489,19 @@ impl ThreadedStepper {
     }
 }
 
-/// [`gather`] in parallel chunks of [`MIN_CHUNK`].
-fn gather_in_parallel(values: &[f64], order: &[u32], into: &mut [f64]) {
-    into.par_chunks_mut(MIN_CHUNK)
-        .zip(order.par_chunks(MIN_CHUNK))
-        .for_each(|(into, order)| gather(values, order, into));
+/// [`gather`] in chunks of [`MIN_CHUNK`] over the team.
+fn gather_in_parallel(team: &Team<'_>, values: &[f64], order: &[u32], into: &mut [f64]) {
+    let mut chunks: Vec<_> = into
+        .chunks_mut(MIN_CHUNK)
+        .zip(order.chunks(MIN_CHUNK))
+        .collect();
+    team.for_each(&mut chunks, |(into, order)| gather(values, order, into));
 }
 
-/// [`label_in_place`] in parallel chunks of [`MIN_CHUNK`].
-fn label_in_parallel(ids: &[u32], slots: &mut [u32]) {
-    slots
-        .par_chunks_mut(MIN_CHUNK)
-        .for_each(|slots| label_in_place(ids, slots));
+/// [`label_in_place`] in chunks of [`MIN_CHUNK`] over the team.
+fn label_in_parallel(team: &Team<'_>, ids: &[u32], slots: &mut [u32]) {
+    let mut chunks: Vec<_> = slots.chunks_mut(MIN_CHUNK).collect();
+    team.for_each(&mut chunks, |slots| label_in_place(ids, slots));
 }
 
 /// Cuts the owned strips (global index 0 first) into the given bands, each with the

@@ -19,6 +19,7 @@ use anyhow::{Context, bail};
 use minifb::{Key, KeyRepeat, ScaleMode, Window, WindowOptions};
 use serde::Serialize;
 
+use crate::backend::team::with_team;
 use crate::backend::threads::{self, ThreadedStepper};
 use crate::draw::raster::{Drawn, Frame, View, draw, fast_speed};
 use crate::run::backend_kind::BackendKind;
@@ -519,7 +520,9 @@ impl Stepping {
     fn step(&mut self, particles: &mut Particles) {
         match self {
             Stepping::Serial(engine) => engine.step(particles),
-            Stepping::Rayon { pool, stepper } => pool.install(|| stepper.step(particles)),
+            Stepping::Rayon { pool, stepper } => {
+                pool.install(|| with_team(|team| stepper.step(particles, team)))
+            }
         }
     }
 }

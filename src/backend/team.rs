@@ -1,0 +1,343 @@
+//! A team of a rayon pool's threads that stays awake for a whole run: the rayon
+//! backend's stages are split over it, phase after phase, without any thread going to
+//! sleep between them.
+//!
+//! Why not rayon's own parallel iterators: a rayon worker that finds no work for some
+//! 30 µs goes to sleep, and waking a sleeping vCPU took 33–68 µs on the virtual machines
+//! this was measured on. A step of the rayon backend is some ten parallel phases with
+//! serial pieces between them; every phase started with a sleeping worker, or ended
+//! with one thread waiting, asleep, for the other's last piece. Worse, a vCPU that has
+//! been idle runs only in bursts for the next 100–300 ms (the host's scheduling, see
+//! `docs/performance.md`), and a step in lock-step waits for its slowest thread. A
+//! team member waits as Intel's OpenMP threads do by default: it polls for the next
+//! phase, yielding its core between polls, and parks only after [`IDLE_BEFORE_PARKING`]
+//! without work (`KMP_BLOCKTIME`, also 200 ms there).
+//!
+//! Which thread runs which piece of a phase is decided at run time (the first free
+//! takes the next piece); results never depend on it, since every piece writes only its
+//! own output and reductions run afterwards, in piece order, on the leader.
+
+use std::any::Any;
+use std::cell::UnsafeCell;
+use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::thread::Thread;
+use std::time::{Duration, Instant};
+
+/// How long a member polls for the next phase before it parks: through the serial
+/// pieces of a step, the loop between steps and most of a run's set-up (the team forms
+/// before it), so that the first steps find every thread on a busy, scheduled core; not
+/// so long that a paused view keeps a core busy for more than a moment.
+const IDLE_BEFORE_PARKING: Duration = Duration::from_millis(200);
+
+/// The threads of the current rayon pool, as a team led by the calling thread; see
+/// [`with_team`].
+pub struct Team<'a> {
+    shared: &'a Shared,
+    n_members: usize,
+}
+
+/// Runs `work` on this thread, a worker of a rayon pool (inside `ThreadPool::install`),
+/// with every other worker of the pool joined to a [`Team`] that `work` can split
+/// phases over. The other workers must be free to join (nothing else runs on the pool:
+/// a phase waits for every member), and are held until `work` returns (or panics).
+pub fn with_team<R>(work: impl FnOnce(&Team<'_>) -> R) -> R {
+    let n_members = rayon::current_num_threads().saturating_sub(1);
+    let shared = Shared::default();
+    rayon::in_place_scope(|scope| {
+        for _ in 0..n_members {
+            scope.spawn(|_| shared.serve());
+        }
+        let team = Team {
+            shared: &shared,
+            n_members,
+        };
+        // Dismissed however `work` ends: the scope waits for every member to leave.
+        let _dismiss = Dismiss(&shared);
+        work(&team)
+    })
+}
+
+impl Team<'_> {
+    /// Threads that work in a phase: the leader and its members.
+    pub fn n_threads(&self) -> usize {
+        self.n_members + 1
+    }
+
+    /// Calls `task` once with each of `items`, spread over the team (each item to the
+    /// first thread free); returns when every call has returned. A panic in a call is
+    /// raised again here, after the others have returned.
+    pub fn for_each<T: Send>(&self, items: &mut [T], task: impl Fn(&mut T) + Sync) {
+        let items = ItemsPtr(items.as_mut_ptr(), items.len());
+        let items = &items;
+        // SAFETY: `run` calls the closure with each index below the length once, so
+        // every `&mut` points to a different item, alive until `run` returns.
+        self.run(items.1, &|index| task(unsafe { &mut *items.0.add(index) }));
+    }
+
+    /// `task` of each item, in the items' order ([`Team::for_each`]).
+    pub fn map<T: Send, U: Send>(
+        &self,
+        items: impl IntoIterator<Item = T>,
+        task: impl Fn(T) -> U + Sync,
+    ) -> Vec<U> {
+        let mut slots: Vec<Slot<T, U>> = items.into_iter().map(Slot::Input).collect();
+        self.for_each(&mut slots, |slot| {
+            if let Slot::Input(item) = std::mem::replace(slot, Slot::Taken) {
+                *slot = Slot::Output(task(item));
+            }
+        });
+        slots
+            .into_iter()
+            .map(|slot| match slot {
+                Slot::Output(output) => output,
+                _ => unreachable!("every item was mapped"),
+            })
+            .collect()
+    }
+
+    /// Calls `task(index)` for every index in `0..n_items` over the team.
+    fn run(&self, n_items: usize, task: &(dyn Fn(usize) + Sync)) {
+        let shared = self.shared;
+        if self.n_members == 0 || n_items <= 1 {
+            (0..n_items).for_each(task);
+            return;
+        }
+        // SAFETY: the members read the phase only after the generation below changes
+        // and stop using `task` before they count themselves finished, which this
+        // function waits for: the erased lifetime is never outlived.
+        let task: *const (dyn Fn(usize) + Sync + 'static) =
+            unsafe { std::mem::transmute::<*const (dyn Fn(usize) + Sync + '_), _>(task) };
+        // SAFETY: every member finished the previous phase (waited for below), and none
+        // reads the phase before the generation changes.
+        unsafe { *shared.phase.get() = Phase { task, n_items } };
+        shared.next_item.store(0, Ordering::Relaxed);
+        shared.finished.store(0, Ordering::Relaxed);
+        shared.publish();
+        shared.take_items();
+        while shared.finished.load(Ordering::Acquire) < self.n_members {
+            std::thread::yield_now();
+        }
+        let panic = shared.panic.lock().map(|mut held| held.take());
+        if let Ok(Some(payload)) = panic {
+            resume_unwind(payload);
+        }
+    }
+}
+
+/// A slice's items (start and length), handed to the threads one each
+/// ([`Team::for_each`]).
+struct ItemsPtr<T>(*mut T, usize);
+
+// SAFETY: the items are `Send`, and each is reached from one thread only.
+unsafe impl<T: Send> Sync for ItemsPtr<T> {}
+
+enum Slot<T, U> {
+    Input(T),
+    Taken,
+    Output(U),
+}
+
+/// The phase the members work on: a task and its number of items.
+#[derive(Clone, Copy)]
+struct Phase {
+    task: *const (dyn Fn(usize) + Sync + 'static),
+    n_items: usize,
+}
+
+/// What the leader and the members share.
+struct Shared {
+    /// Counts the phases published; members wait for it to change.
+    generation: AtomicU64,
+    /// Written by the leader only while every member waits for the next generation.
+    phase: UnsafeCell<Phase>,
+    next_item: AtomicUsize,
+    /// Members done with the current phase.
+    finished: AtomicUsize,
+    dismissed: AtomicBool,
+    /// The first panic of a phase's tasks, raised again by the leader.
+    panic: Mutex<Option<Box<dyn Any + Send>>>,
+    /// Members parked, and their threads to unpark.
+    n_parked: AtomicUsize,
+    parked: Mutex<Vec<Thread>>,
+}
+
+// SAFETY: `phase` is written by the leader only while no member reads it (see
+// `Team::run`), and its task is `Sync`.
+unsafe impl Sync for Shared {}
+
+impl Default for Shared {
+    fn default() -> Self {
+        let idle: &'static (dyn Fn(usize) + Sync) = &|_| {};
+        Shared {
+            generation: AtomicU64::new(0),
+            phase: UnsafeCell::new(Phase {
+                task: idle,
+                n_items: 0,
+            }),
+            next_item: AtomicUsize::new(0),
+            finished: AtomicUsize::new(0),
+            dismissed: AtomicBool::new(false),
+            panic: Mutex::new(None),
+            n_parked: AtomicUsize::new(0),
+            parked: Mutex::new(Vec::new()),
+        }
+    }
+}
+
+impl Shared {
+    /// A member's life: wait for a phase, take its items, count itself finished.
+    fn serve(&self) {
+        let mut seen = 0;
+        loop {
+            seen = self.wait_for_phase(seen);
+            if self.dismissed.load(Ordering::Acquire) {
+                return;
+            }
+            self.take_items();
+            self.finished.fetch_add(1, Ordering::Release);
+        }
+    }
+
+    /// Runs items of the current phase until none is left.
+    fn take_items(&self) {
+        // SAFETY: read after the phase's generation was seen (acquire), before this
+        // thread counts itself finished; the leader waits for that.
+        let Phase { task, n_items } = unsafe { *self.phase.get() };
+        let task = unsafe { &*task };
+        loop {
+            let index = self.next_item.fetch_add(1, Ordering::Relaxed);
+            if index >= n_items {
+                return;
+            }
+            if let Err(payload) = catch_unwind(AssertUnwindSafe(|| task(index)))
+                && let Ok(mut held) = self.panic.lock()
+            {
+                held.get_or_insert(payload);
+            }
+        }
+    }
+
+    /// Publishes a new phase (or the dismissal) and wakes parked members.
+    fn publish(&self) {
+        // Sequentially consistent with the members' parking: either a member sees the
+        // new generation, or this sees it parked and unparks it.
+        self.generation.fetch_add(1, Ordering::SeqCst);
+        if self.n_parked.load(Ordering::SeqCst) > 0
+            && let Ok(parked) = self.parked.lock()
+        {
+            parked.iter().for_each(Thread::unpark);
+        }
+    }
+
+    /// Polls until the generation differs from `seen` and returns it; parks after
+    /// [`IDLE_BEFORE_PARKING`].
+    fn wait_for_phase(&self, seen: u64) -> u64 {
+        let idle_since = Instant::now();
+        let mut polls: u32 = 0;
+        loop {
+            let generation = self.generation.load(Ordering::Acquire);
+            if generation != seen {
+                return generation;
+            }
+            // The clock is read every 64 polls: a poll stays a load and a yield.
+            polls = polls.wrapping_add(1);
+            if !polls.is_multiple_of(64) || idle_since.elapsed() < IDLE_BEFORE_PARKING {
+                // Yielding, not spinning: the core goes to whatever else is runnable,
+                // and under valgrind (which runs one thread at a time) to the leader.
+                std::thread::yield_now();
+                continue;
+            }
+            if let Ok(mut parked) = self.parked.lock() {
+                let me = std::thread::current();
+                if !parked.iter().any(|thread| thread.id() == me.id()) {
+                    parked.push(me);
+                }
+            }
+            self.n_parked.fetch_add(1, Ordering::SeqCst);
+            if self.generation.load(Ordering::SeqCst) == seen {
+                // An unpark before this park makes it return at once.
+                std::thread::park();
+            }
+            self.n_parked.fetch_sub(1, Ordering::SeqCst);
+        }
+    }
+}
+
+/// Dismisses the members when dropped.
+struct Dismiss<'a>(&'a Shared);
+
+impl Drop for Dismiss<'_> {
+    fn drop(&mut self) {
+        self.0.dismissed.store(true, Ordering::Release);
+        self.0.publish();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pool(threads: usize) -> rayon::ThreadPool {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("a pool")
+    }
+
+    #[test]
+    fn every_item_is_given_to_exactly_one_call_in_every_phase() {
+        for threads in [1, 2, 3] {
+            let mut counts = vec![0_u32; 1000];
+            pool(threads).install(|| {
+                with_team(|team| {
+                    assert_eq!(team.n_threads(), threads);
+                    for _ in 0..50 {
+                        team.for_each(&mut counts, |count| *count += 1);
+                    }
+                })
+            });
+            assert!(counts.iter().all(|&count| count == 50), "{threads} threads");
+        }
+    }
+
+    #[test]
+    fn a_map_returns_its_outputs_in_the_order_of_its_items() {
+        let squares = pool(2).install(|| with_team(|team| team.map(0..300_u64, |i| i * i)));
+        assert_eq!(squares, (0..300_u64).map(|i| i * i).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn a_panic_in_a_task_reaches_the_leader_and_the_pool_stays_usable() {
+        let pool = pool(2);
+        let outcome = catch_unwind(AssertUnwindSafe(|| {
+            pool.install(|| {
+                with_team(|team| {
+                    team.for_each(&mut [0, 1, 2, 3, 4, 5, 6, 7], |item| {
+                        assert_ne!(*item, 5, "item 5 panics");
+                    });
+                })
+            })
+        }));
+        assert!(outcome.is_err(), "the panic was raised again");
+        let sum: u64 = pool.install(|| with_team(|team| team.map(1..=4_u64, |i| i).iter().sum()));
+        assert_eq!(sum, 10);
+    }
+
+    #[test]
+    fn members_idle_for_long_park_and_wake_for_the_next_phase() {
+        pool(3).install(|| {
+            with_team(|team| {
+                let parked_all = || team.shared.n_parked.load(Ordering::SeqCst) == 2;
+                let give_up = Instant::now() + IDLE_BEFORE_PARKING * 20;
+                while !parked_all() && Instant::now() < give_up {
+                    std::thread::sleep(IDLE_BEFORE_PARKING / 4);
+                }
+                assert!(parked_all(), "both members parked");
+                let doubled = team.map(0..64_u32, |i| 2 * i);
+                assert_eq!(doubled, (0..64_u32).map(|i| 2 * i).collect::<Vec<_>>());
+            })
+        });
+    }
+}
