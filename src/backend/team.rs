@@ -6,16 +6,18 @@
 //! 30 µs goes to sleep, and waking a sleeping vCPU took 33–68 µs on the virtual machines
 //! this was measured on. A step of the rayon backend is some ten parallel phases with
 //! serial pieces between them; every phase started with a sleeping worker, or ended
-//! with one thread waiting, asleep, for the other's last piece. Worse, a vCPU that has
-//! been idle runs only in bursts for the next 100–300 ms (the host's scheduling, see
-//! `docs/performance.md`), and a step in lock-step waits for its slowest thread. A
-//! team member waits as Intel's OpenMP threads do by default: it polls for the next
-//! phase, yielding its core between polls, and parks only after [`IDLE_BEFORE_PARKING`]
-//! without work (`KMP_BLOCKTIME`, also 200 ms there).
+//! with one thread waiting, asleep, for the other's last piece: at 10⁵ disks the second
+//! thread did little at all. A team member waits as Intel's OpenMP threads do by
+//! default: it polls for the next phase, yielding its core between polls, and parks
+//! only after [`IDLE_BEFORE_PARKING`] without work (`KMP_BLOCKTIME`, also 200 ms
+//! there).
 //!
-//! Which thread runs which piece of a phase is decided at run time (the first free
-//! takes the next piece); results never depend on it, since every piece writes only its
-//! own output and reductions run afterwards, in piece order, on the leader.
+//! The thread that leads the team takes a phase's pieces too, and a phase ends when
+//! its pieces are done: a member that has not come by the time every piece is handed
+//! out (descheduled by the host, or one of more threads than cores) is not waited for.
+//! Which thread runs which piece is decided at run time (the first free takes the
+//! next); results never depend on it, since every piece writes only its own output and
+//! reductions run afterwards, in piece order, on the leader.
 
 use std::any::Any;
 use std::cell::UnsafeCell;
@@ -26,9 +28,8 @@ use std::thread::Thread;
 use std::time::{Duration, Instant};
 
 /// How long a member polls for the next phase before it parks: through the serial
-/// pieces of a step, the loop between steps and most of a run's set-up (the team forms
-/// before it), so that the first steps find every thread on a busy, scheduled core; not
-/// so long that a paused view keeps a core busy for more than a moment.
+/// pieces of a step and the loop between steps (drawing a step offscreen included);
+/// not so long that a team left idle keeps a core busy for more than a moment.
 const IDLE_BEFORE_PARKING: Duration = Duration::from_millis(200);
 
 /// The threads of the current rayon pool, as a team led by the calling thread; see
@@ -40,8 +41,8 @@ pub struct Team<'a> {
 
 /// Runs `work` on this thread, a worker of a rayon pool (inside `ThreadPool::install`),
 /// with every other worker of the pool joined to a [`Team`] that `work` can split
-/// phases over. The other workers must be free to join (nothing else runs on the pool:
-/// a phase waits for every member), and are held until `work` returns (or panics).
+/// phases over. The other workers are held until `work` returns (or panics); one that
+/// is busy elsewhere meanwhile only leaves more of each phase to the others.
 pub fn with_team<R>(work: impl FnOnce(&Team<'_>) -> R) -> R {
     let n_members = rayon::current_num_threads().saturating_sub(1);
     let shared = Shared::default();
@@ -97,28 +98,28 @@ impl Team<'_> {
             .collect()
     }
 
-    /// Calls `task(index)` for every index in `0..n_items` over the team.
+    /// Calls `task(index)` for every index in `0..n_items` over the team. A member
+    /// that has not joined by the time the leader has handed out every index is not
+    /// waited for: a phase costs the leader no more than its items when the other
+    /// threads are slow to come (descheduled, or more threads than cores).
     fn run(&self, n_items: usize, task: &(dyn Fn(usize) + Sync)) {
         let shared = self.shared;
         if self.n_members == 0 || n_items <= 1 {
             (0..n_items).for_each(task);
             return;
         }
-        // SAFETY: the members read the phase only after the generation below changes
-        // and stop using `task` before they count themselves finished, which this
-        // function waits for: the erased lifetime is never outlived.
+        // SAFETY: a member calls `task` only inside the phase opened below, and this
+        // function returns only after closing it and seeing no member inside: the
+        // erased lifetime is never outlived.
         let task: *const (dyn Fn(usize) + Sync + 'static) =
             unsafe { std::mem::transmute::<*const (dyn Fn(usize) + Sync + '_), _>(task) };
-        // SAFETY: every member finished the previous phase (waited for below), and none
-        // reads the phase before the generation changes.
+        // SAFETY: the last phase is closed with no member inside, and a member reads
+        // the phase only once inside an open one.
         unsafe { *shared.phase.get() = Phase { task, n_items } };
         shared.next_item.store(0, Ordering::Relaxed);
-        shared.finished.store(0, Ordering::Relaxed);
-        shared.publish();
+        shared.open_phase();
         shared.take_items();
-        while shared.finished.load(Ordering::Acquire) < self.n_members {
-            std::thread::yield_now();
-        }
+        shared.close_phase();
         let panic = shared.panic.lock().map(|mut held| held.take());
         if let Ok(Some(payload)) = panic {
             resume_unwind(payload);
@@ -148,13 +149,14 @@ struct Phase {
 
 /// What the leader and the members share.
 struct Shared {
-    /// Counts the phases published; members wait for it to change.
+    /// Odd while a phase is open, even while none is: the leader adds one to open a
+    /// phase and one to close it.
     generation: AtomicU64,
-    /// Written by the leader only while every member waits for the next generation.
+    /// Written by the leader only while no phase is open and no member is inside one.
     phase: UnsafeCell<Phase>,
     next_item: AtomicUsize,
-    /// Members done with the current phase.
-    finished: AtomicUsize,
+    /// Members inside the open phase (or checking whether they may enter it).
+    inside: AtomicUsize,
     dismissed: AtomicBool,
     /// The first panic of a phase's tasks, raised again by the leader.
     panic: Mutex<Option<Box<dyn Any + Send>>>,
@@ -177,7 +179,7 @@ impl Default for Shared {
                 n_items: 0,
             }),
             next_item: AtomicUsize::new(0),
-            finished: AtomicUsize::new(0),
+            inside: AtomicUsize::new(0),
             dismissed: AtomicBool::new(false),
             panic: Mutex::new(None),
             n_parked: AtomicUsize::new(0),
@@ -187,23 +189,26 @@ impl Default for Shared {
 }
 
 impl Shared {
-    /// A member's life: wait for a phase, take its items, count itself finished.
+    /// A member's life: wait for a phase it has not worked in, enter it if it is still
+    /// open, take its items, leave; until dismissed.
     fn serve(&self) {
         let mut seen = 0;
-        loop {
-            seen = self.wait_for_phase(seen);
-            if self.dismissed.load(Ordering::Acquire) {
-                return;
+        while let Some(generation) = self.wait_for_phase(seen) {
+            seen = generation;
+            // Sequentially consistent with `close_phase`: either the leader sees this
+            // member inside and waits for it, or this sees the phase closed.
+            self.inside.fetch_add(1, Ordering::SeqCst);
+            if self.generation.load(Ordering::SeqCst) == generation {
+                self.take_items();
             }
-            self.take_items();
-            self.finished.fetch_add(1, Ordering::Release);
+            self.inside.fetch_sub(1, Ordering::Release);
         }
     }
 
-    /// Runs items of the current phase until none is left.
+    /// Runs items of the open phase until none is left.
     fn take_items(&self) {
-        // SAFETY: read after the phase's generation was seen (acquire), before this
-        // thread counts itself finished; the leader waits for that.
+        // SAFETY: read inside an open phase (see `serve` and `Team::run`), which the
+        // leader does not close and return from while this thread is inside.
         let Phase { task, n_items } = unsafe { *self.phase.get() };
         let task = unsafe { &*task };
         loop {
@@ -219,29 +224,41 @@ impl Shared {
         }
     }
 
-    /// Publishes a new phase (or the dismissal) and wakes parked members.
-    fn publish(&self) {
+    /// Opens the phase written in `phase` and wakes parked members.
+    fn open_phase(&self) {
         // Sequentially consistent with the members' parking: either a member sees the
         // new generation, or this sees it parked and unparks it.
         self.generation.fetch_add(1, Ordering::SeqCst);
-        if self.n_parked.load(Ordering::SeqCst) > 0
-            && let Ok(parked) = self.parked.lock()
-        {
+        if self.n_parked.load(Ordering::SeqCst) > 0 {
+            self.unpark_all();
+        }
+    }
+
+    /// Closes the open phase, whose items are all handed out, and returns once no
+    /// member is inside it (their items are then done, their writes seen).
+    fn close_phase(&self) {
+        self.generation.fetch_add(1, Ordering::SeqCst);
+        while self.inside.load(Ordering::SeqCst) != 0 {
+            std::thread::yield_now();
+        }
+    }
+
+    fn unpark_all(&self) {
+        if let Ok(parked) = self.parked.lock() {
             parked.iter().for_each(Thread::unpark);
         }
     }
 
-    /// Polls until the generation differs from `seen` and returns it; parks after
-    /// [`IDLE_BEFORE_PARKING`].
-    fn wait_for_phase(&self, seen: u64) -> u64 {
+    /// Polls until a phase other than `seen` is open, and returns its generation, or
+    /// `None` once dismissed; parks after [`IDLE_BEFORE_PARKING`].
+    fn wait_for_phase(&self, seen: u64) -> Option<u64> {
         let idle_since = Instant::now();
         let mut polls: u32 = 0;
         loop {
-            let generation = self.generation.load(Ordering::Acquire);
-            if generation != seen {
-                return generation;
+            if let Some(next) = self.next_phase(seen) {
+                return next;
             }
-            // The clock is read every 64 polls: a poll stays a load and a yield.
+            // The clock is read every 64 polls: a poll stays two loads and a yield.
             polls = polls.wrapping_add(1);
             if !polls.is_multiple_of(64) || idle_since.elapsed() < IDLE_BEFORE_PARKING {
                 // Yielding, not spinning: the core goes to whatever else is runnable,
@@ -256,12 +273,22 @@ impl Shared {
                 }
             }
             self.n_parked.fetch_add(1, Ordering::SeqCst);
-            if self.generation.load(Ordering::SeqCst) == seen {
+            if self.next_phase(seen).is_none() {
                 // An unpark before this park makes it return at once.
                 std::thread::park();
             }
             self.n_parked.fetch_sub(1, Ordering::SeqCst);
         }
+    }
+
+    /// `Some(None)` once dismissed, `Some(Some(generation))` while a phase other than
+    /// `seen` is open, `None` otherwise.
+    fn next_phase(&self, seen: u64) -> Option<Option<u64>> {
+        if self.dismissed.load(Ordering::SeqCst) {
+            return Some(None);
+        }
+        let generation = self.generation.load(Ordering::SeqCst);
+        (generation % 2 == 1 && generation != seen).then_some(Some(generation))
     }
 }
 
@@ -270,8 +297,8 @@ struct Dismiss<'a>(&'a Shared);
 
 impl Drop for Dismiss<'_> {
     fn drop(&mut self) {
-        self.0.dismissed.store(true, Ordering::Release);
-        self.0.publish();
+        self.0.dismissed.store(true, Ordering::SeqCst);
+        self.0.unpark_all();
     }
 }
 
@@ -300,6 +327,26 @@ mod tests {
             });
             assert!(counts.iter().all(|&count| count == 50), "{threads} threads");
         }
+    }
+
+    /// Two items that each wait for the other to start can only finish on two threads.
+    #[test]
+    fn a_member_takes_items_of_a_phase_beside_the_leader() {
+        let started = AtomicUsize::new(0);
+        let threads = pool(2).install(|| {
+            with_team(|team| {
+                team.map(0..2, |_| {
+                    started.fetch_add(1, Ordering::SeqCst);
+                    let give_up = Instant::now() + Duration::from_secs(30);
+                    while started.load(Ordering::SeqCst) < 2 && Instant::now() < give_up {
+                        std::thread::yield_now();
+                    }
+                    std::thread::current().id()
+                })
+            })
+        });
+        assert_eq!(started.load(Ordering::SeqCst), 2);
+        assert_ne!(threads[0], threads[1], "the two items ran on two threads");
     }
 
     #[test]

@@ -58,18 +58,6 @@ pub fn pool(threads: NonZeroUsize) -> Result<rayon::ThreadPool, BackendError> {
 pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendError> {
     let setup_start = Instant::now();
     let pool = pool(threads)?;
-    // The team forms before the set-up, so that its members wait for the first step
-    // awake, as they wait between phases (`backend::team`).
-    pool.install(|| with_team(|team| run_on(team, spec, threads, setup_start)))
-}
-
-/// [`run`] on a team of the pool, the set-up timed from `setup_start`.
-fn run_on(
-    team: &Team<'_>,
-    spec: &RunSpec,
-    threads: NonZeroUsize,
-    setup_start: Instant,
-) -> Result<RunOutcome, BackendError> {
     let mut prepared = spec.prepare()?;
     let mut particles = prepared.take_particles();
     let scene = &prepared.scene;
@@ -84,11 +72,15 @@ fn run_on(
     let initial = observe(&particles);
     let mut offscreen = Offscreen::when(spec.method.draw, &prepared.scene.domain, &particles);
 
-    let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Process, |_| {
-        stepper.step(&mut particles, team);
-        // The snapshot and the rasterizer are serial: drawing runs on this thread.
-        draw_step(&mut offscreen, &particles);
-        ControlFlow::Continue(())
+    let seconds = pool.install(|| {
+        with_team(|team| {
+            step_loop(prepared.steps, spec.slowdown, CpuScope::Process, |_| {
+                stepper.step(&mut particles, team);
+                // The snapshot and the rasterizer are serial: drawing runs on this thread.
+                draw_step(&mut offscreen, &particles);
+                ControlFlow::Continue(())
+            })
+        })
     });
 
     // Drawing is out of both clocks: its own seconds (CPU the pool's waiting threads
