@@ -49,28 +49,23 @@ pub struct Measured {
 /// `cargo bench --features mpi --bench kernels -- '^(step|event)/'` on one idle machine
 /// (docs/accuracy.md, Choosing automatically), both methods in the same runs so that
 /// their rates compare even where the machine differs: the median of three runs within
-/// 40 minutes (this VM's speed drifted by up to 35% between them; the observation
-/// rates from the last, the first to time them with the state cold in the caches).
-/// The step method's rates are the median of three later runs of
-/// `cargo bench --features mpi --bench kernels -- '^step/'` on the same machine
-/// (2026-11-25, 13:24–13:28 UTC, after prefetches into the second-level cache sped up
-/// the resolution of large scenes; the runs differed by up to 18%, and their build also
-/// fetched ahead in the escapee queries, since removed as worth under 1%): 0.95–0.98×
-/// the rates of 11:14–11:18 UTC at 10⁴ (untouched: noise), 1.04–1.11× at 10⁵,
-/// 1.11–1.19× at 10⁶.
+/// 20 minutes (2026-11-26, 09:21–09:40 UTC, an AMD EPYC VM that ran the step method
+/// 1.35–1.48× and the event method 1.2–2.0× faster than the one of the table before;
+/// the runs differed by up to 8% in the step rates, 25% in the event rates at 10⁵ and
+/// more in the observation rates at 10⁵).
 /// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [
-        measured(1e4, 0.05, 129.5e6, 0.947e6, 432e6),
-        measured(1e4, 0.3, 64.6e6, 1.49e6, 457e6),
+        measured(1e4, 0.05, 183.6e6, 1.151e6, 600e6),
+        measured(1e4, 0.3, 95.5e6, 2.096e6, 597e6),
     ],
     [
-        measured(1e5, 0.05, 130.5e6, 0.235e6, 68.0e6),
-        measured(1e5, 0.3, 64.5e6, 0.612e6, 90.6e6),
+        measured(1e5, 0.05, 181.2e6, 0.481e6, 254e6),
+        measured(1e5, 0.3, 93.3e6, 0.961e6, 387e6),
     ],
     [
-        measured(1e6, 0.05, 103.4e6, 0.190e6, 79.6e6),
-        measured(1e6, 0.3, 55.1e6, 0.456e6, 110e6),
+        measured(1e6, 0.05, 147.2e6, 0.277e6, 103e6),
+        measured(1e6, 0.3, 74.0e6, 0.562e6, 123e6),
     ],
 ];
 
