@@ -1,7 +1,7 @@
 //! The rayon backend: the serial reference's stages split over bands of strips, on a
 //! thread pool of exactly the requested size built for the run, giving the serial bits.
-//! The pool's threads work as one [`Team`] for the whole run (`backend::team`: why not
-//! rayon's parallel iterators).
+//! The pool's threads step as one [`Team`] (`backend::team`: why not rayon's parallel
+//! iterators).
 //!
 //! Per step: disks move in parallel chunks; the grid is refreshed band by band (each
 //! band re-sorts its strips and hands disks that changed strip to the band that now
