@@ -399,8 +399,12 @@ impl ThreadedStepper {
                 grid.store_in_grid_order_with(
                     particles,
                     scratch,
-                    |values, order, into| gather_in_parallel(team, values, order, into),
-                    |ids, slots| label_in_parallel(team, ids, slots),
+                    |values, order, into| {
+                        in_chunks(team, into, |start, into| {
+                            gather(values, &order[start..start + into.len()], into)
+                        })
+                    },
+                    |ids, slots| in_chunks(team, slots, |_, slots| label_in_place(ids, slots)),
                 );
             });
         }
@@ -481,19 +485,14 @@ impl ThreadedStepper {
     }
 }
 
-/// [`gather`] in chunks of [`MIN_CHUNK`] over the team.
-fn gather_in_parallel(team: &Team<'_>, values: &[f64], order: &[u32], into: &mut [f64]) {
-    let mut chunks: Vec<_> = into
-        .chunks_mut(MIN_CHUNK)
-        .zip(order.chunks(MIN_CHUNK))
-        .collect();
-    team.for_each(&mut chunks, |(into, order)| gather(values, order, into));
-}
-
-/// [`label_in_place`] in chunks of [`MIN_CHUNK`] over the team.
-fn label_in_parallel(team: &Team<'_>, ids: &[u32], slots: &mut [u32]) {
-    let mut chunks: Vec<_> = slots.chunks_mut(MIN_CHUNK).collect();
-    team.for_each(&mut chunks, |slots| label_in_place(ids, slots));
+/// `pass(start, chunk)` on the chunks of [`MIN_CHUNK`] values of `values` over the
+/// team, `start` the index of a chunk's first value (the re-storing's gathers and
+/// labelling).
+fn in_chunks<T: Send>(team: &Team<'_>, values: &mut [T], pass: impl Fn(usize, &mut [T]) + Sync) {
+    let mut chunks: Vec<_> = values.chunks_mut(MIN_CHUNK).enumerate().collect();
+    team.for_each(&mut chunks, |(index, chunk)| {
+        pass(*index * MIN_CHUNK, chunk)
+    });
 }
 
 /// Cuts the owned strips (global index 0 first) into the given bands, each with the
