@@ -50,7 +50,7 @@ pub struct Measured {
 /// (docs/accuracy.md, Choosing automatically), both methods in the same runs so that
 /// their rates compare even where the machine differs: the median of three runs within
 /// 20 minutes (2026-11-26, 09:21–09:40 UTC, an AMD EPYC VM that ran the step method
-/// 1.35–1.48× and the event method 1.2–2.0× faster than the one of the table before;
+/// 1.34–1.48× and the event method 1.2–2.1× faster than the one of the table before;
 /// the runs differed by up to 8% in the step rates, 25% in the event rates at 10⁵ and
 /// more in the observation rates at 10⁵).
 /// By N (rows), packing 0.05 then 0.3.
