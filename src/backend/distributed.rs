@@ -50,6 +50,7 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     let layout = StripLayout::with_skin(&scene.domain, &scene.particles, skin.width());
     let slabs = slabs(&layout, &scene.particles, comm.size())?;
     let mut rank = RankState::new(comm, &prepared.scene, layout, &slabs, skin);
+    rank.build_lists(comm);
     // The ranks start their clocks together: a rank whose set-up ended first would
     // otherwise count its wait for the slowest one (as much as a fifth of the stepping
     // time at 10⁶ disks) as stepping and communication. The wait is set-up.
@@ -337,13 +338,7 @@ impl RankState {
         let stale = self.skin.is_exceeded(moved_sq);
         let rebuild = stale && !self.skin.may_patch(n_escapees, self.n_disks, moved_sq);
         if rebuild {
-            let emigrants = timed(&mut stages.broad_phase, || self.refresh(comm.size()));
-            let immigrants = timed(&mut stages.communication, || comm.exchange(&emigrants));
-            timed(&mut stages.broad_phase, || {
-                self.migrate(comm.size(), &immigrants);
-                self.skin.record(&self.particles);
-                self.mark_exported();
-            });
+            self.redistribute(comm, &mut stages);
         }
         let ghosts = timed(&mut stages.communication, || {
             comm.exchange(&self.halo(comm.size()))
@@ -363,6 +358,32 @@ impl RankState {
             self.resolve_shared_chains(&shared, dt)
         });
         self.stages = stages;
+    }
+
+    /// The first half of a rebuild, on every rank together: the disks that left the
+    /// slab go to their strips' ranks, the slab is re-sorted (and re-stored when the
+    /// [`ReorderSchedule`] says so), and the positions are recorded for the lists.
+    fn redistribute<C: Communicator>(&mut self, comm: &C, stages: &mut StageSeconds) {
+        let emigrants = timed(&mut stages.broad_phase, || self.refresh(comm.size()));
+        let immigrants = timed(&mut stages.communication, || comm.exchange(&emigrants));
+        timed(&mut stages.broad_phase, || {
+            self.migrate(comm.size(), &immigrants);
+            self.skin.record(&self.particles);
+            self.mark_exported();
+        });
+    }
+
+    /// Builds the lists at the disks' present positions, on every rank together, as the
+    /// first step would (the serial `Stepper::build_lists`): a run's set-up, untimed.
+    fn build_lists<C: Communicator>(&mut self, comm: &C) {
+        let mut untimed = StageSeconds::default();
+        self.redistribute(comm, &mut untimed);
+        let ghosts = comm.exchange(&self.halo(comm.size()));
+        self.find_contacts(&ghosts, true, None, comm.rank());
+        // The pairs found at the placed positions are found again by the first step.
+        self.contacts.clear();
+        self.shared.clear();
+        self.particles.truncate(self.n_own);
     }
 
     /// What the other ranks need to know of this rank's disks that escaped the list:

@@ -32,6 +32,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
             let scene = &prepared.scene;
             let mut stepper =
                 Stepper::new(scene.domain, scene.physics, prepared.params, &particles);
+            stepper.build_lists(&mut particles);
             let setup_s = setup_start.elapsed().as_secs_f64();
             let mut missed =
                 (prepared.observe == Observe::Accuracy).then(MissedCollisions::default);

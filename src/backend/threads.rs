@@ -68,18 +68,20 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
         &particles,
         threads.get(),
     );
-    let setup_s = setup_start.elapsed().as_secs_f64();
     let initial = observe(&particles);
     let mut offscreen = Offscreen::when(spec.method.draw, &prepared.scene.domain, &particles);
 
-    let seconds = pool.install(|| {
+    let (setup_s, seconds) = pool.install(|| {
         with_team(|team| {
-            step_loop(prepared.steps, spec.slowdown, CpuScope::Process, |_| {
+            stepper.build_lists(&mut particles, team);
+            let setup_s = setup_start.elapsed().as_secs_f64();
+            let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Process, |_| {
                 stepper.step(&mut particles, team);
                 // The snapshot and the rasterizer are serial: drawing runs on this thread.
                 draw_step(&mut offscreen, &particles);
                 ControlFlow::Continue(())
-            })
+            });
+            (setup_s, seconds)
         })
     });
 
@@ -172,6 +174,14 @@ impl ThreadedStepper {
             schedules: Vec::new(),
             counters: StepCounters::default(),
             stages: StageSeconds::default(),
+        }
+    }
+
+    /// Builds the neighbour lists at the disks' present positions, as
+    /// [`crate::sim::Stepper::build_lists`] does: a run's set-up.
+    pub fn build_lists(&mut self, particles: &mut Particles, team: &Team<'_>) {
+        if self.params.broadphase == Broadphase::Grid && !self.skin.is_built_for(particles) {
+            self.rebuild_lists(particles, team);
         }
     }
 

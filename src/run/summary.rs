@@ -39,7 +39,8 @@ pub struct RunSummary {
     /// waiting for a CPU is not counted); null where unknown.
     #[serde(default)]
     pub cpu_s: Option<f64>,
-    /// Seconds to build the initial state and scratch memory.
+    /// Seconds to build the initial state and scratch memory, the first neighbour lists
+    /// included.
     pub setup_s: f64,
     /// Steps per second of `wall_s`.
     pub fps: f64,
