@@ -514,44 +514,4 @@ mod tests {
         assert_eq!(restoring_builds(LARGE_SCENE_DISKS - 1, 40), [1, 17, 33]);
         assert_eq!(restoring_builds(LARGE_SCENE_DISKS, 8), [1, 3, 5, 7]);
     }
-
-    /// Lists built in a run's set-up, before the first move, change no bit of what the
-    /// steps give (a gas of unequal, inelastic disks, dilute and dense): the same disks
-    /// by id, the same counters.
-    #[test]
-    fn lists_built_before_the_first_step_change_no_result() {
-        use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution};
-        for packing in [0.05, 0.35] {
-            let scene = GasSpec {
-                radius: RadiusDistribution::Uniform { min: 0.5, max: 1.5 },
-                mass: MassRule::Area,
-                physics: Physics::with_restitution(0.9),
-                seed: 11,
-                ..GasSpec::unit(3000, packing)
-            }
-            .build()
-            .expect("places");
-            let params = StepParams {
-                dt: 0.2,
-                broadphase: Broadphase::Grid,
-            };
-            let run = |build_first: bool| {
-                let mut particles = scene.particles.clone();
-                let mut stepper = Stepper::for_scene(&scene, params);
-                if build_first {
-                    stepper.build_lists(&mut particles);
-                }
-                for _ in 0..60 {
-                    stepper.step(&mut particles);
-                }
-                (particles.disks_by_id(), stepper.counters())
-            };
-            let (lazily, built_first) = (run(false), run(true));
-            assert!(
-                lazily.1.pair_collisions > 0,
-                "packing {packing}: the disks collide"
-            );
-            assert_eq!(lazily, built_first, "packing {packing}");
-        }
-    }
 }
