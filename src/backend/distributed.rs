@@ -31,7 +31,7 @@ use crate::sim::grid::{
     Contact, Mover, StripGrid, StripLayout, order_canonically, receive_band, refresh_band,
     sort_movers,
 };
-use crate::sim::neighbours::{PairList, Skin, larger};
+use crate::sim::neighbours::{PairList, Skin, larger, with_reorder_scratch};
 use crate::sim::observe::observe;
 use crate::sim::particles::PACKED_LEN;
 use crate::sim::resolve::resolve_contacts;
@@ -478,7 +478,8 @@ impl RankState {
         if self.reorder.count_build() {
             // The list is rebuilt next: it lends its memory, as the serial stepper's does.
             let (grid, particles) = (&mut self.grid, &mut self.particles);
-            self.list.with_reorder_scratch(particles.len(), |scratch| {
+            let lists = std::slice::from_mut(&mut self.list);
+            with_reorder_scratch(lists, particles.len(), |scratch| {
                 grid.store_in_grid_order(particles, scratch);
             });
         }

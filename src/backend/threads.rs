@@ -28,7 +28,9 @@ use crate::sim::grid::{
     Contact, Entry, Mover, StripGrid, find_contacts_all_pairs_from, order_canonically,
     receive_band, refresh_band,
 };
-use crate::sim::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin, round_positions};
+use crate::sim::neighbours::{
+    DISPLACEMENT_BLOCK, Displacements, PairList, Skin, round_positions, with_reorder_scratch,
+};
 use crate::sim::observe::observe;
 use crate::sim::particles::{gather, label_in_place};
 use crate::sim::prefetch::prefetch;
@@ -397,15 +399,10 @@ impl ThreadedStepper {
             receive_band(band, *first, &movers)
         });
         if self.reorder.count_build() {
-            // The lists are rebuilt next: freed, but the first, which the re-storing
-            // works in as the serial stepper's does.
-            if self.lists.is_empty() {
-                self.lists.push(PairList::default());
-            }
-            let (first, others) = self.lists.split_at_mut(1);
-            others.iter_mut().for_each(PairList::release);
+            // The lists are rebuilt next: the re-storing works in their memory, as the
+            // serial stepper's does.
             let grid = &mut self.grid;
-            first[0].with_reorder_scratch(particles.len(), |scratch| {
+            with_reorder_scratch(&mut self.lists, particles.len(), |scratch| {
                 grid.store_in_grid_order_with(
                     particles,
                     scratch,

@@ -403,46 +403,6 @@ impl PairList {
         self.pairs = Vec::new();
     }
 
-    /// Runs `work`, a re-storing of `n_disks` disks, in scratch memory, and leaves the
-    /// list empty, to be rebuilt. A re-storing needs 12 bytes per disk: a list that
-    /// holds as much (a dense gas's holds some 20) lends its own memory, so that the
-    /// re-storing takes none and the list, rebuilt into the same pages, waits for no
-    /// fresh ones (at 10⁷ disks the kernel's page faults made one scan in two a third
-    /// slower); a smaller list is released and the scratch is fresh memory, taking its
-    /// place, as before.
-    pub fn with_reorder_scratch<R>(
-        &mut self,
-        n_disks: usize,
-        work: impl FnOnce(ReorderScratch<'_>) -> R,
-    ) -> R {
-        // Words of 4 bytes: the order's, the spare values' (two each), and one more for
-        // the values to start on a multiple of 8 bytes.
-        let lendable = 2 * self.pairs.len() > 3 * n_disks;
-        let (mut fresh_order, mut fresh_spare) = (Vec::new(), Vec::new());
-        let (order, spare) = if lendable {
-            let (order, rest) = self.pairs.as_flattened_mut().split_at_mut(n_disks);
-            // SAFETY: every bit pattern of the words is a valid f64.
-            let (_, aligned, _) = unsafe { rest.align_to_mut::<f64>() };
-            // `align_to_mut` may in principle leave the values short: then fresh memory.
-            match aligned.get_mut(..n_disks) {
-                Some(spare) => (order, spare),
-                None => {
-                    fresh_spare.resize(n_disks, 0.0);
-                    (order, &mut fresh_spare[..])
-                }
-            }
-        } else {
-            self.release();
-            fresh_order.resize(n_disks, 0);
-            fresh_spare.resize(n_disks, 0.0);
-            (&mut fresh_order[..], &mut fresh_spare[..])
-        };
-        let result = work(ReorderScratch { order, spare });
-        self.pairs.clear();
-        self.n_particles = 0;
-        result
-    }
-
     /// Appends the listed pairs that overlap now, in list order, with the grid's test.
     pub fn find_contacts(
         &self,
@@ -517,6 +477,66 @@ impl PairList {
             }
         }
     }
+}
+
+/// Runs `work`, a re-storing of `n_disks` disks, in scratch memory, and leaves every one
+/// of `lists` empty, to be rebuilt. A re-storing needs 12 bytes per disk: 4 for the new
+/// order and 8 for a spare array of values. Lists about to be rebuilt lend their memory
+/// when it holds that much: one list both parts (the serial stepper's in a dense gas
+/// holds some 20 bytes per disk), or one the order and another the values (the two
+/// band lists of two threads hold some 10 each). Then the re-storing takes no memory
+/// and the lists, rebuilt into the same pages, wait for no fresh ones (at 10⁷ disks the
+/// kernel's page faults made one scan in two a third slower). Otherwise every list
+/// is released and the scratch is fresh memory, taking their place.
+pub fn with_reorder_scratch<R>(
+    lists: &mut [PairList],
+    n_disks: usize,
+    work: impl FnOnce(ReorderScratch<'_>) -> R,
+) -> R {
+    let result = match lent_scratch(lists, n_disks) {
+        Some(scratch) => work(scratch),
+        None => {
+            lists.iter_mut().for_each(PairList::release);
+            // Zeroed by the allocator: fresh pages, not a pass writing zeros.
+            let (mut order, mut spare) = (vec![0; n_disks], vec![0.0; n_disks]);
+            work(ReorderScratch {
+                order: &mut order,
+                spare: &mut spare,
+            })
+        }
+    };
+    for list in lists {
+        list.pairs.clear();
+        list.n_particles = 0;
+    }
+    result
+}
+
+/// The scratch of a re-storing of `n_disks` disks in the memory of `lists`, if they hold
+/// enough ([`with_reorder_scratch`]): the values from the longest list, the order from
+/// the rest of it, or else from the next longest.
+fn lent_scratch(lists: &mut [PairList], n_disks: usize) -> Option<ReorderScratch<'_>> {
+    let mut by_length: Vec<&mut [u32]> = lists
+        .iter_mut()
+        .map(|list| list.pairs.as_flattened_mut())
+        .collect();
+    by_length.sort_unstable_by_key(|words| std::cmp::Reverse(words.len()));
+    let mut longest = by_length.into_iter();
+    let first = longest.next()?;
+    // The values start on a multiple of 8 bytes: in the longest list after the order
+    // when both fit, else in the whole of it.
+    let (order, values) = if first.len() > 3 * n_disks {
+        let (order, rest) = first.split_at_mut(n_disks);
+        (order, rest)
+    } else {
+        (longest.next()?.get_mut(..n_disks)?, first)
+    };
+    // SAFETY: every bit pattern of the words is a valid f64.
+    let (_, aligned, _) = unsafe { values.align_to_mut::<f64>() };
+    Some(ReorderScratch {
+        order,
+        spare: aligned.get_mut(..n_disks)?,
+    })
 }
 
 #[cfg(test)]
@@ -721,13 +741,15 @@ mod tests {
         }
     }
 
-    /// A re-storing that works in a dense gas's list (which holds room for it) stores
-    /// the disks as one in fresh memory does, bit for bit, with unequal radii and masses
-    /// (six arrays to carry); a dilute gas's list is too small and gives up its memory
-    /// instead, with the same result. Either way the disks are only reordered.
+    /// A re-storing that works in the lists' memory stores the disks as one in fresh
+    /// memory does, bit for bit, with unequal radii and masses (six arrays to carry):
+    /// a dense gas's list lends both parts of the scratch, the two lists of two bands
+    /// one part each; a dilute gas's lists are too small and give up their memory
+    /// instead, with the same result. Either way the disks are only reordered, and the
+    /// lists are left empty.
     #[test]
     fn a_restoring_in_the_lists_memory_stores_the_disks_as_in_fresh_memory() {
-        use crate::sim::neighbours::{PairList, Skin};
+        use crate::sim::neighbours::{PairList, Skin, lent_scratch, with_reorder_scratch};
         use crate::sim::particles::ReorderScratch;
         for packing in [0.05, 0.35] {
             let scene = unequal_gas(packing, 5).build().expect("places");
@@ -735,16 +757,6 @@ mod tests {
             let skin = Skin::for_scene(&scene.domain, &scene.particles, 0.1);
             let mut grid = StripGrid::with_skin(&scene.domain, &scene.particles, skin.width());
             grid.build(&scene.particles);
-            let mut list = PairList::default();
-            list.rebuild(&grid, grid.owned(), &scene.particles, &scene.domain, &skin);
-            let lends = 2 * list.pairs.len() > 3 * n;
-            assert_eq!(lends, packing > 0.3, "packing {packing}: the list lends");
-
-            let mut in_list = scene.particles.clone();
-            list.with_reorder_scratch(n, |scratch| {
-                grid.clone().store_in_grid_order(&mut in_list, scratch);
-            });
-            assert!(list.pairs.is_empty(), "the list is left empty");
             let mut in_fresh = scene.particles.clone();
             let (mut order, mut spare) = (vec![0; n], vec![0.0; n]);
             let scratch = ReorderScratch {
@@ -752,10 +764,46 @@ mod tests {
                 spare: &mut spare,
             };
             grid.clone().store_in_grid_order(&mut in_fresh, scratch);
-
-            assert_eq!(in_list, in_fresh, "packing {packing}");
-            assert_ne!(in_list.id, scene.particles.id, "the disks were reordered");
-            assert_eq!(in_list.disks_by_id(), scene.particles.disks_by_id());
+            let halves = grid.bands(2);
+            assert_eq!(halves.len(), 2, "two bands");
+            let built = |strips: &[std::ops::Range<usize>]| -> Vec<PairList> {
+                strips
+                    .iter()
+                    .map(|strips| {
+                        let mut list = PairList::default();
+                        list.rebuild(
+                            &grid,
+                            strips.clone(),
+                            &scene.particles,
+                            &scene.domain,
+                            &skin,
+                        );
+                        list
+                    })
+                    .collect()
+            };
+            for mut lists in [built(&[grid.owned()]), built(&halves)] {
+                let lends = lent_scratch(&mut lists, n).is_some();
+                assert_eq!(
+                    lends,
+                    packing > 0.3,
+                    "packing {packing}, {} lists",
+                    lists.len()
+                );
+                let mut in_lists = scene.particles.clone();
+                with_reorder_scratch(&mut lists, n, |scratch| {
+                    grid.clone().store_in_grid_order(&mut in_lists, scratch);
+                });
+                assert!(lists.iter().all(|list| list.pairs.is_empty()), "left empty");
+                assert_eq!(
+                    in_lists,
+                    in_fresh,
+                    "packing {packing}, {} lists",
+                    lists.len()
+                );
+            }
+            assert_ne!(in_fresh.id, scene.particles.id, "the disks were reordered");
+            assert_eq!(in_fresh.disks_by_id(), scene.particles.disks_by_id());
         }
     }
 

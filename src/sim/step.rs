@@ -10,7 +10,9 @@ use serde::{Deserialize, Serialize};
 
 use super::counters::StepCounters;
 use super::grid::{Contact, StripGrid, find_contacts_all_pairs};
-use super::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin, mark_escapees};
+use super::neighbours::{
+    DISPLACEMENT_BLOCK, Displacements, PairList, Skin, mark_escapees, with_reorder_scratch,
+};
 use super::particles::{DiskSlices, Particles, PerDiskSlice};
 use super::resolve::resolve_contacts;
 use super::scene::{Boundary, Domain, Physics, Scene, wrap_periodic};
@@ -242,10 +244,10 @@ impl Stepper {
             // Storing disks in grid order keeps the next builds' reads sequential. It
             // works in the memory of the list, rebuilt below.
             let grid = &mut self.grid;
-            self.neighbours
-                .with_reorder_scratch(particles.len(), |scratch| {
-                    grid.store_in_grid_order(particles, scratch);
-                });
+            let lists = std::slice::from_mut(&mut self.neighbours);
+            with_reorder_scratch(lists, particles.len(), |scratch| {
+                grid.store_in_grid_order(particles, scratch);
+            });
         }
         let strips = self.grid.owned();
         self.neighbours
