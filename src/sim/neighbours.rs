@@ -513,8 +513,8 @@ pub fn with_reorder_scratch<R>(
 }
 
 /// The scratch of a re-storing of `n_disks` disks in the memory of `lists`, if they hold
-/// enough ([`with_reorder_scratch`]): the values from the longest list, the order from
-/// the rest of it, or else from the next longest.
+/// enough ([`with_reorder_scratch`]): the order and then the values from the longest
+/// list when it holds both, else the values from it and the order from the next longest.
 fn lent_scratch(lists: &mut [PairList], n_disks: usize) -> Option<ReorderScratch<'_>> {
     let mut by_length: Vec<&mut [u32]> = lists
         .iter_mut()
