@@ -379,10 +379,8 @@ impl RankState {
         let mut untimed = StageSeconds::default();
         self.redistribute(comm, &mut untimed);
         let ghosts = comm.exchange(&self.halo(comm.size()));
-        self.find_contacts(&ghosts, true, None, comm.rank());
-        // The pairs found at the placed positions are found again by the first step.
-        self.contacts.clear();
-        self.shared.clear();
+        self.take_ghosts(&ghosts, true);
+        // The first step brings the ghosts again, in the same order.
         self.particles.truncate(self.n_own);
     }
 
@@ -513,17 +511,9 @@ impl RankState {
         outgoing
     }
 
-    /// Appends the ghosts after the own disks, rebuilds the list (with `rebuild`), finds
-    /// the listed pairs that overlap and, with `escapees` (every rank's report and a
-    /// bound on how far any disk moved), the pairs of the escapees that involve an own
-    /// disk, and splits them into chains of the rank's own and chains to share.
-    fn find_contacts(
-        &mut self,
-        ghosts: &[Vec<f64>],
-        rebuild: bool,
-        escapees: Option<(&[Vec<f64>], f64)>,
-        me: usize,
-    ) {
+    /// Appends the ghosts after the own disks and, with `rebuild`, rebuilds the list
+    /// with them.
+    fn take_ghosts(&mut self, ghosts: &[Vec<f64>], rebuild: bool) {
         let n_own = self.particles.len();
         self.n_own = n_own;
         if rebuild {
@@ -548,6 +538,21 @@ impl RankState {
                 &self.skin,
             );
         }
+    }
+
+    /// [`RankState::take_ghosts`], then finds the listed pairs that overlap and, with
+    /// `escapees` (every rank's report and a bound on how far any disk moved), the pairs
+    /// of the escapees that involve an own disk, and splits them into chains of the
+    /// rank's own and chains to share.
+    fn find_contacts(
+        &mut self,
+        ghosts: &[Vec<f64>],
+        rebuild: bool,
+        escapees: Option<(&[Vec<f64>], f64)>,
+        me: usize,
+    ) {
+        self.take_ghosts(ghosts, rebuild);
+        let n_own = self.n_own;
         self.contacts.clear();
         self.list
             .find_contacts(&self.particles, &self.domain, &mut self.contacts);
