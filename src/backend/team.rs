@@ -16,9 +16,20 @@
 //! The thread that leads the team takes a phase's pieces too, and a phase ends when
 //! its pieces are done: a member that has not come by the time every piece is handed
 //! out (descheduled by the host, or one of more threads than cores) is not waited for.
-//! Which thread runs which piece is decided at run time (the first free takes the
-//! next); results never depend on it, since every piece writes only its own output and
-//! reductions run afterwards, in piece order, on the leader.
+//!
+//! Each thread first takes the pieces of its own share, a contiguous run of them (the
+//! leader the first, member k the (k+1)-th), then helps with what is left of the
+//! others'. The backend cuts every phase the same way, in storage order (chunks of the
+//! disks, bands of strips, whose disks are stored in band order), so a thread works on
+//! the same disks phase after phase and step after step, which keeps them in its own
+//! core's caches. When the first free thread took the next piece, a thread often moved
+//! disks the other had just written, and on the 2-vCPU virtual machines measured,
+//! during spells that came and went within minutes, the move of 10⁶ disks took 115–135
+//! ms over 100 steps instead of 78–85, while two MPI ranks, each with its own disks,
+//! were not slowed (the likeliest reason, not measured directly: the host then ran the
+//! two vCPUs on cores that share no cache). Shares keep the move at 81–86 ms in those
+//! spells (`docs/performance.md`). Results never depend on which thread ran a piece: every piece writes only its own
+//! output, and reductions run afterwards, in piece order, on the leader.
 
 use std::any::Any;
 use std::cell::UnsafeCell;
@@ -46,10 +57,12 @@ pub struct Team<'a> {
 /// is busy elsewhere meanwhile only leaves more of each phase to the others.
 pub fn with_team<R>(work: impl FnOnce(&Team<'_>) -> R) -> R {
     let n_members = rayon::current_num_threads().saturating_sub(1);
-    let shared = Shared::default();
+    let shared = Shared::new(n_members + 1);
     rayon::in_place_scope(|scope| {
-        for _ in 0..n_members {
-            scope.spawn(|_| shared.serve());
+        for member in 0..n_members {
+            let shared = &shared;
+            // Thread 0 of the team is the leader.
+            scope.spawn(move |_| shared.serve(member + 1));
         }
         let team = Team {
             shared: &shared,
@@ -111,10 +124,15 @@ impl Team<'_> {
             unsafe { std::mem::transmute::<*const (dyn Fn(usize) + Sync + '_), _>(task) };
         // SAFETY: the last phase is closed with no member inside, and a member reads
         // the phase only once inside an open one.
-        unsafe { *shared.phase.get() = Phase { task, n_items } };
-        shared.next_item.store(0, Ordering::Relaxed);
+        unsafe {
+            *shared.phase.get() = Phase {
+                task,
+                n_items,
+                n_threads: self.n_members + 1,
+            }
+        };
         shared.open_phase();
-        shared.take_items();
+        shared.take_items(0);
         shared.close_phase();
         let panic = shared.panic.lock().map(|mut held| held.take());
         if let Ok(Some(payload)) = panic {
@@ -136,12 +154,28 @@ enum Slot<T, U> {
     Output(U),
 }
 
-/// The phase the members work on: a task and its number of items.
+/// The phase the members work on: a task and its number of items, shared out among
+/// the team's threads.
 #[derive(Clone, Copy)]
 struct Phase {
     task: *const (dyn Fn(usize) + Sync + 'static),
     n_items: usize,
+    n_threads: usize,
 }
+
+impl Phase {
+    /// The first item of thread `thread`'s share (the leader's is 0); the share ends
+    /// where the next thread's starts, the last at `n_items`.
+    fn share_start(&self, thread: usize) -> usize {
+        thread * self.n_items / self.n_threads
+    }
+}
+
+/// The next unclaimed item of one thread's share, alone in its cache line(s): every
+/// thread claims from it once it has run out of its own share.
+#[derive(Default)]
+#[repr(align(128))]
+struct Cursor(AtomicUsize);
 
 /// What the leader and the members share.
 struct Shared {
@@ -150,7 +184,9 @@ struct Shared {
     generation: AtomicU64,
     /// Written by the leader only while no phase is open and no member is inside one.
     phase: UnsafeCell<Phase>,
-    next_item: AtomicUsize,
+    /// Per thread of the team (the leader first), the next item of its share; set by
+    /// the leader before it opens a phase.
+    cursors: Vec<Cursor>,
     /// Members inside the open phase (or checking whether they may enter it).
     inside: AtomicUsize,
     dismissed: AtomicBool,
@@ -165,16 +201,18 @@ struct Shared {
 // `Team::run`), and its task is `Sync`.
 unsafe impl Sync for Shared {}
 
-impl Default for Shared {
-    fn default() -> Self {
+impl Shared {
+    /// The state of a team of `n_threads` threads, the leader included.
+    fn new(n_threads: usize) -> Self {
         let idle: &'static (dyn Fn(usize) + Sync) = &|_| {};
         Shared {
             generation: AtomicU64::new(0),
             phase: UnsafeCell::new(Phase {
                 task: idle,
                 n_items: 0,
+                n_threads,
             }),
-            next_item: AtomicUsize::new(0),
+            cursors: (0..n_threads).map(|_| Cursor::default()).collect(),
             inside: AtomicUsize::new(0),
             dismissed: AtomicBool::new(false),
             panic: Mutex::new(None),
@@ -182,12 +220,10 @@ impl Default for Shared {
             members: Mutex::new(Vec::new()),
         }
     }
-}
 
-impl Shared {
     /// A member's life: wait for a phase it has not worked in, enter it if it is still
     /// open, take its items, leave; until dismissed.
-    fn serve(&self) {
+    fn serve(&self, thread: usize) {
         if let Ok(mut members) = self.members.lock() {
             members.push(std::thread::current());
         }
@@ -198,33 +234,44 @@ impl Shared {
             // member inside and waits for it, or this sees the phase closed.
             self.inside.fetch_add(1, Ordering::SeqCst);
             if self.generation.load(Ordering::SeqCst) == generation {
-                self.take_items();
+                self.take_items(thread);
             }
             self.inside.fetch_sub(1, Ordering::Release);
         }
     }
 
-    /// Runs items of the open phase until none is left.
-    fn take_items(&self) {
+    /// Runs items of the open phase until none is left: those of the share of thread
+    /// `thread` first, then what is left of the next threads' shares.
+    fn take_items(&self, thread: usize) {
         // SAFETY: read inside an open phase (see `serve` and `Team::run`), which the
         // leader does not close and return from while this thread is inside.
-        let Phase { task, n_items } = unsafe { *self.phase.get() };
-        let task = unsafe { &*task };
-        loop {
-            let index = self.next_item.fetch_add(1, Ordering::Relaxed);
-            if index >= n_items {
-                return;
-            }
-            if let Err(payload) = catch_unwind(AssertUnwindSafe(|| task(index)))
-                && let Ok(mut held) = self.panic.lock()
-            {
-                held.get_or_insert(payload);
+        let phase = unsafe { *self.phase.get() };
+        let task = unsafe { &*phase.task };
+        for offset in 0..phase.n_threads {
+            let share = (thread + offset) % phase.n_threads;
+            let end = phase.share_start(share + 1);
+            loop {
+                let index = self.cursors[share].0.fetch_add(1, Ordering::Relaxed);
+                if index >= end {
+                    break;
+                }
+                if let Err(payload) = catch_unwind(AssertUnwindSafe(|| task(index)))
+                    && let Ok(mut held) = self.panic.lock()
+                {
+                    held.get_or_insert(payload);
+                }
             }
         }
     }
 
-    /// Opens the phase written in `phase` and wakes parked members.
+    /// Opens the phase written in `phase`, every share unclaimed, and wakes parked
+    /// members.
     fn open_phase(&self) {
+        // SAFETY: written by the leader before the phase opens (`Team::run`).
+        let phase = unsafe { *self.phase.get() };
+        for (thread, cursor) in self.cursors.iter().enumerate() {
+            cursor.0.store(phase.share_start(thread), Ordering::Relaxed);
+        }
         // Sequentially consistent with the members' parking: either a member sees the
         // new generation, or this sees it parked and unparks it.
         self.generation.fetch_add(1, Ordering::SeqCst);
@@ -340,6 +387,34 @@ mod tests {
         });
         assert_eq!(started.load(Ordering::SeqCst), 2);
         assert_ne!(threads[0], threads[1], "the two items ran on two threads");
+    }
+
+    /// Each thread starts on its own share: of four items, the leader runs the first
+    /// two and the member the last two. Every item waits until the item that starts
+    /// the other thread's share (for items 0 and 2), or every item (for 1 and 3), has
+    /// started, so neither thread can run out of work and take from the other's share.
+    #[test]
+    fn each_thread_runs_its_own_share_of_a_phase() {
+        let started = AtomicUsize::new(0);
+        let (leader, threads) = pool(2).install(|| {
+            let leader = std::thread::current().id();
+            let threads = with_team(|team| {
+                team.map(0..4, |item| {
+                    started.fetch_add(1, Ordering::SeqCst);
+                    let wait_for = if item % 2 == 0 { 2 } else { 4 };
+                    let give_up = Instant::now() + Duration::from_secs(30);
+                    while started.load(Ordering::SeqCst) < wait_for && Instant::now() < give_up {
+                        std::thread::yield_now();
+                    }
+                    std::thread::current().id()
+                })
+            });
+            (leader, threads)
+        });
+        assert_eq!(started.load(Ordering::SeqCst), 4);
+        assert_eq!(threads[..2], [leader, leader], "the leader's share");
+        assert_eq!(threads[2], threads[3], "the member's share");
+        assert_ne!(threads[2], leader, "the member's share");
     }
 
     #[test]
