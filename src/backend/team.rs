@@ -75,9 +75,9 @@ pub fn with_team<R>(work: impl FnOnce(&Team<'_>) -> R) -> R {
 }
 
 impl Team<'_> {
-    /// Calls `task` once with each of `items`, spread over the team (each item to the
-    /// first thread free); returns when every call has returned. A panic in a call is
-    /// raised again here, after the others have returned.
+    /// Calls `task` once with each of `items`, spread over the team (each thread its
+    /// own share of them first, then any left); returns when every call has returned.
+    /// A panic in a call is raised again here, after the others have returned.
     pub fn for_each<T: Send>(&self, items: &mut [T], task: impl Fn(&mut T) + Sync) {
         let items = ItemsPtr(items.as_mut_ptr(), items.len());
         let items = &items;
