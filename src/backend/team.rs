@@ -27,9 +27,10 @@
 //! during spells that came and went within minutes, the move of 10⁶ disks took 115–135
 //! ms over 100 steps instead of 78–85, while two MPI ranks, each with its own disks,
 //! were not slowed (the likeliest reason, not measured directly: the host then ran the
-//! two vCPUs on cores that share no cache). Shares keep the move at 81–86 ms in those
-//! spells (`docs/performance.md`). Results never depend on which thread ran a piece: every piece writes only its own
-//! output, and reductions run afterwards, in piece order, on the leader.
+//! two vCPUs on cores that share no cache). Shares keep the move at 81–89 ms in those
+//! spells (`docs/performance.md`). Results never depend on which thread ran a piece:
+//! every piece writes only its own output, and reductions run afterwards, in piece
+//! order, on the leader.
 
 use std::any::Any;
 use std::cell::UnsafeCell;
