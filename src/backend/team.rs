@@ -24,7 +24,7 @@
 //! the same disks phase after phase and step after step, which keeps them in its own
 //! core's caches. When the first free thread took the next piece, a thread often moved
 //! disks the other had just written, and on the 2-vCPU virtual machines measured,
-//! during spells that came and went within minutes, the move of 10⁶ disks took 115–135
+//! during spells that came and went within minutes, the move of 10⁶ disks took 113–135
 //! ms over 100 steps instead of 78–85, while two MPI ranks, each with its own disks,
 //! were not slowed (the likeliest reason, not measured directly: the host then ran the
 //! two vCPUs on cores that share no cache). Shares keep the move at 81–89 ms in those
@@ -125,13 +125,7 @@ impl Team<'_> {
             unsafe { std::mem::transmute::<*const (dyn Fn(usize) + Sync + '_), _>(task) };
         // SAFETY: the last phase is closed with no member inside, and a member reads
         // the phase only once inside an open one.
-        unsafe {
-            *shared.phase.get() = Phase {
-                task,
-                n_items,
-                n_threads: self.n_members + 1,
-            }
-        };
+        unsafe { *shared.phase.get() = Phase { task, n_items } };
         shared.open_phase();
         shared.take_items(0);
         shared.close_phase();
@@ -155,21 +149,11 @@ enum Slot<T, U> {
     Output(U),
 }
 
-/// The phase the members work on: a task and its number of items, shared out among
-/// the team's threads.
+/// The phase the members work on: a task and its number of items.
 #[derive(Clone, Copy)]
 struct Phase {
     task: *const (dyn Fn(usize) + Sync + 'static),
     n_items: usize,
-    n_threads: usize,
-}
-
-impl Phase {
-    /// The first item of thread `thread`'s share (the leader's is 0); the share ends
-    /// where the next thread's starts, the last at `n_items`.
-    fn share_start(&self, thread: usize) -> usize {
-        thread * self.n_items / self.n_threads
-    }
 }
 
 /// The next unclaimed item of one thread's share, alone in its cache line(s): every
@@ -211,7 +195,6 @@ impl Shared {
             phase: UnsafeCell::new(Phase {
                 task: idle,
                 n_items: 0,
-                n_threads,
             }),
             cursors: (0..n_threads).map(|_| Cursor::default()).collect(),
             inside: AtomicUsize::new(0),
@@ -248,9 +231,10 @@ impl Shared {
         // leader does not close and return from while this thread is inside.
         let phase = unsafe { *self.phase.get() };
         let task = unsafe { &*phase.task };
-        for offset in 0..phase.n_threads {
-            let share = (thread + offset) % phase.n_threads;
-            let end = phase.share_start(share + 1);
+        let n_threads = self.cursors.len();
+        for offset in 0..n_threads {
+            let share = (thread + offset) % n_threads;
+            let end = self.share_start(share + 1, phase.n_items);
             loop {
                 let index = self.cursors[share].0.fetch_add(1, Ordering::Relaxed);
                 if index >= end {
@@ -271,7 +255,9 @@ impl Shared {
         // SAFETY: written by the leader before the phase opens (`Team::run`).
         let phase = unsafe { *self.phase.get() };
         for (thread, cursor) in self.cursors.iter().enumerate() {
-            cursor.0.store(phase.share_start(thread), Ordering::Relaxed);
+            cursor
+                .0
+                .store(self.share_start(thread, phase.n_items), Ordering::Relaxed);
         }
         // Sequentially consistent with the members' parking: either a member sees the
         // new generation, or this sees it parked and unparks it.
@@ -279,6 +265,12 @@ impl Shared {
         if self.n_parked.load(Ordering::SeqCst) > 0 {
             self.unpark_all();
         }
+    }
+
+    /// The first of `n_items` items in the share of thread `thread` (the leader's is 0);
+    /// a share ends where the next thread's starts, the last at `n_items`.
+    fn share_start(&self, thread: usize, n_items: usize) -> usize {
+        thread * n_items / self.cursors.len()
     }
 
     /// Closes the open phase, whose items are all handed out, and returns once no
