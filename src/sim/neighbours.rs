@@ -488,11 +488,11 @@ impl PairList {
 /// and the lists, rebuilt into the same pages, wait for no fresh ones (at 10⁷ disks the
 /// kernel's page faults made one scan in two a third slower). A lone list too short
 /// (the serial stepper's or a rank's in a dilute gas, some 4 bytes per disk) grows to
-/// 12 and keeps that room: fresh scratch of 10⁷ disks came from new pages at every
+/// 12 and keeps that room: fresh scratch for 10⁷ disks came from new pages at every
 /// re-storing (too large for the allocator to keep), and a serial run at packing 0.05
-/// took 1.09 times as long (no more memory at its peak, which the re-storing set). Otherwise
-/// every list is released and the scratch is fresh memory, taking their place: the
-/// threads that fill it take the faults of its pages in parallel.
+/// took 1.09 times as long; the peak memory, set by the re-storing, is the same.
+/// Otherwise every list is released and the scratch is fresh memory, taking their
+/// place: the threads that fill it fault its pages in parallel.
 pub fn with_reorder_scratch<R>(
     lists: &mut [PairList],
     n_disks: usize,
