@@ -49,7 +49,6 @@ const IDLE_BEFORE_PARKING: Duration = Duration::from_millis(200);
 /// [`with_team`].
 pub struct Team<'a> {
     shared: &'a Shared,
-    n_members: usize,
 }
 
 /// Runs `work` on this thread, a worker of a rayon pool (inside `ThreadPool::install`),
@@ -65,10 +64,7 @@ pub fn with_team<R>(work: impl FnOnce(&Team<'_>) -> R) -> R {
             // Thread 0 of the team is the leader.
             scope.spawn(move |_| shared.serve(member + 1));
         }
-        let team = Team {
-            shared: &shared,
-            n_members,
-        };
+        let team = Team { shared: &shared };
         // Dismissed however `work` ends: the scope waits for every member to leave.
         let _dismiss = Dismiss(&shared);
         work(&team)
@@ -76,6 +72,11 @@ pub fn with_team<R>(work: impl FnOnce(&Team<'_>) -> R) -> R {
 }
 
 impl Team<'_> {
+    /// The threads of the team other than the leader (one cursor each).
+    fn n_members(&self) -> usize {
+        self.shared.cursors.len() - 1
+    }
+
     /// Calls `task` once with each of `items`, spread over the team (each thread its
     /// own share of them first, then any left); returns when every call has returned.
     /// A panic in a call is raised again here, after the others have returned.
@@ -114,7 +115,7 @@ impl Team<'_> {
     /// threads are slow to come (descheduled, or more threads than cores).
     fn run(&self, n_items: usize, task: &(dyn Fn(usize) + Sync)) {
         let shared = self.shared;
-        if self.n_members == 0 || n_items <= 1 {
+        if self.n_members() == 0 || n_items <= 1 {
             (0..n_items).for_each(task);
             return;
         }
@@ -352,7 +353,7 @@ mod tests {
             let mut counts = vec![0_u32; 1000];
             pool(threads).install(|| {
                 with_team(|team| {
-                    assert_eq!(team.n_members + 1, threads);
+                    assert_eq!(team.n_members() + 1, threads);
                     for _ in 0..50 {
                         team.for_each(&mut counts, |count| *count += 1);
                     }

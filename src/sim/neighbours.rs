@@ -498,14 +498,15 @@ pub fn with_reorder_scratch<R>(
     n_disks: usize,
     work: impl FnOnce(ReorderScratch<'_>) -> R,
 ) -> R {
-    if let [list] = lists
-        && lent_scratch(std::slice::from_mut(list), n_disks).is_none()
-    {
-        // One list too short to lend (a dilute gas's): it grows to hold the scratch, and
-        // keeps the room for the next re-storings and builds.
-        let words = 3 * n_disks + 2;
-        list.pairs.clear();
-        list.pairs.resize(words.div_ceil(2), [0, 0]);
+    if let [list] = lists {
+        // Room for the order (n words) and n values (2n words, and one more should the
+        // values need aligning): a list that long lends both. A shorter one (a dilute
+        // gas's) grows to it, its pairs kept and only the rest written, and keeps the
+        // room for the next re-storings and builds.
+        let room = (3 * n_disks + 2).div_ceil(2);
+        if list.pairs.len() < room {
+            list.pairs.resize(room, [0, 0]);
+        }
     }
     let result = match lent_scratch(lists, n_disks) {
         Some(scratch) => work(scratch),
