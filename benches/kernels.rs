@@ -17,9 +17,10 @@
 //! gas) and the same number of pair impulses, to 0.5%, after the same 50 steps.
 //! `COLLIDE_YARDSTICK_ONLY=1 cargo bench --bench kernels` prints only the yardstick's rate
 //! (particle-steps per second of 50 steps, by wall time and by the thread's CPU time)
-//! at N = 10^5 and 10^6, packings 0.05 and 0.3, on the scenes `collide simulate` builds
-//! from a scene file with n, packing, radius = 1, mass = 1, speed_rms = 1,
-//! boundary = "walls", restitution = 1, seed = 42 and dt = 0.1.
+//! at N = 10^5 and 10^6 (or the comma-separated sizes of `COLLIDE_YARDSTICK_SIZES`),
+//! packings 0.05 and 0.3, on the scenes `collide simulate` builds from a scene file with
+//! n, packing, radius = 1, mass = 1, speed_rms = 1, boundary = "walls", restitution = 1,
+//! seed = 42 and dt = 0.1.
 
 use std::time::{Duration, Instant};
 
@@ -286,8 +287,21 @@ fn distributed_step(c: &mut Criterion) {
 fn yardstick_rates() {
     const UNTIMED_STEPS: usize = 10;
     const TIMED_STEPS: usize = 50;
+    let sizes: Vec<usize> = match std::env::var("COLLIDE_YARDSTICK_SIZES") {
+        Ok(sizes) => sizes
+            .split(',')
+            .map(|n| {
+                n.trim().parse().unwrap_or_else(|_| {
+                    panic!(
+                        "COLLIDE_YARDSTICK_SIZES: `{n}` is not a disk count (e.g. 100000,1000000)"
+                    )
+                })
+            })
+            .collect(),
+        Err(_) => vec![100_000, 1_000_000],
+    };
     println!("yardstick N packing steps rate_M/s cpu_rate_M/s");
-    for n in [100_000, 1_000_000] {
+    for n in sizes {
         for packing in [0.05, 0.3] {
             let scene = gas(n, packing);
             let particle_steps = (n * TIMED_STEPS) as f64;
