@@ -403,16 +403,17 @@ impl ThreadedStepper {
             // serial stepper's does.
             let grid = &mut self.grid;
             with_reorder_scratch(&mut self.lists, particles.len(), |scratch| {
-                grid.store_in_grid_order_with(
-                    particles,
-                    scratch,
-                    |values, order, into| {
-                        in_chunks(team, into, |start, into| {
-                            gather(values, &order[start..start + into.len()], into)
-                        })
-                    },
-                    |ids, slots| in_chunks(team, slots, |_, slots| label_in_place(ids, slots)),
-                );
+                grid.store_in_grid_order_with(particles, scratch, |particles, scratch| {
+                    particles.gather_arrays(
+                        scratch,
+                        |values, order, into| {
+                            in_chunks(team, into, |start, into| {
+                                gather(values, &order[start..start + into.len()], into)
+                            })
+                        },
+                        |ids, slots| in_chunks(team, slots, |_, slots| label_in_place(ids, slots)),
+                    );
+                });
             });
         }
         bands

@@ -6,7 +6,7 @@
 
 use std::ops::{Range, RangeInclusive};
 
-use super::particles::{Particles, ReorderScratch, gather, label_in_place};
+use super::particles::{Particles, ReorderScratch};
 use super::scene::{Boundary, Domain, minimum_image};
 
 /// An overlapping pair: the storage indices of its two disks, in either order. Every
@@ -300,30 +300,31 @@ impl StripGrid {
     /// grid order (strip, then x), working in `scratch`, and points the entries to their
     /// new slots. Results do not change: pair order and sums go by id, not storage.
     pub fn store_in_grid_order(&mut self, particles: &mut Particles, scratch: ReorderScratch<'_>) {
-        self.store_in_grid_order_with(particles, scratch, gather, label_in_place);
+        // A disk that changed strips since it was stored moved by about a strip's length.
+        let longest = self.strips[..self.n_owned].iter().map(Vec::len).max();
+        let reach = longest.unwrap_or(0) * 9 / 8;
+        self.store_in_grid_order_with(particles, scratch, |particles, scratch| {
+            particles.store_in_order(scratch, reach);
+        });
     }
 
-    /// [`StripGrid::store_in_grid_order`], the arrays gathered into the new order by
-    /// `floats` and `ids` ([`Particles::gather_arrays`]: in one piece or in pieces, a
-    /// parallel backend's).
+    /// [`StripGrid::store_in_grid_order`], the disks stored in the new order (written
+    /// into `scratch.order`) by `store` (in one piece or in pieces, a parallel backend's:
+    /// [`Particles::gather_arrays`]).
     pub fn store_in_grid_order_with(
         &mut self,
         particles: &mut Particles,
         scratch: ReorderScratch<'_>,
-        floats: impl FnMut(&[f64], &[u32], &mut [f64]),
-        ids: impl FnOnce(&[u32], &mut [u32]),
+        store: impl FnOnce(&mut Particles, ReorderScratch<'_>),
     ) {
         assert_eq!(scratch.order.len(), self.len(), "an order of every disk");
-        let entries = self.strips[..self.n_owned].iter().flatten();
-        for (slot, entry) in scratch.order.iter_mut().zip(entries) {
-            *slot = entry.idx;
+        // One pass: each entry's disk goes to the next slot, which the entry then names.
+        let entries = self.strips[..self.n_owned].iter_mut().flatten();
+        for ((slot, order), entry) in scratch.order.iter_mut().enumerate().zip(entries) {
+            *order = entry.idx;
+            entry.idx = slot as u32;
         }
-        particles.gather_arrays(scratch, floats, ids);
-        let mut first_slot = 0;
-        for strip in &mut self.strips[..self.n_owned] {
-            number_slots(strip, first_slot);
-            first_slot += strip.len();
-        }
+        store(particles, scratch);
     }
 
     /// The owned entries of the strip with global index `strip`, in x order.
@@ -964,14 +965,6 @@ pub fn receive_band(band: &mut [Vec<Entry>], first: usize, movers: &[&[Mover]]) 
         for group in list[from..to].chunk_by(|a, b| a.strip == b.strip) {
             merge_sorted(&mut band[group[0].strip() - first], group);
         }
-    }
-}
-
-/// Points the entries of one strip to consecutive storage slots from `first_slot`: the
-/// strip's part of [`StripGrid::store_in_grid_order`].
-fn number_slots(strip: &mut [Entry], first_slot: usize) {
-    for (offset, entry) in strip.iter_mut().enumerate() {
-        entry.idx = (first_slot + offset) as u32;
     }
 }
 

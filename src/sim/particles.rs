@@ -261,6 +261,67 @@ pub fn gather<T: Copy>(values: &[T], order: &[u32], into: &mut [T]) {
     }
 }
 
+/// A re-storing in place ([`Particles::store_in_order`]) gathers the arrays whole
+/// instead when more than one disk in this many was stored far from its new slot.
+const MAX_FAR_SHARE: usize = 64;
+
+/// The furthest from its new slot a re-storing in place reads a disk from its ring
+/// (a ring of 2¹⁶ disks, 2.6 MB of equal disks' values): a box only a few strips tall
+/// has strips as long as the disks are many, and the ring is held whole.
+const MAX_PERMUTE_REACH: usize = (1 << 15) - 1;
+
+/// Puts into slot i of `arrays` and `ids` what was at `order[i]` (a permutation), in
+/// place, in one pass. The old values of the slots within `reach` (or a little more) of
+/// the one written are held in a ring, each saved before its slot is written, so a disk
+/// stored that near its new slot is read from the ring; one stored further after it is
+/// read from its array (not yet written there), one further before it from values saved
+/// before the pass. The ring, not the arrays, takes the scattered reads: at 10⁷ disks
+/// this took 4.1 ns per disk (packing 0.3) where gathering each array whole into a spare
+/// one took 7.7.
+pub fn permute_in_place<const M: usize>(
+    mut arrays: [&mut [f64]; M],
+    ids: &mut [u32],
+    order: &[u32],
+    reach: usize,
+) {
+    let n = order.len();
+    assert!(arrays.iter().all(|values| values.len() == n) && ids.len() == n);
+    let ring_len = (2 * reach + 2).next_power_of_two();
+    let mask = ring_len - 1;
+    // The ring holds the slots from `i - reach` to `i + reach` while slot i is written.
+    let reach = ring_len / 2 - 1;
+    let read = |arrays: &[&mut [f64]; M], ids: &[u32], j: usize| {
+        (std::array::from_fn(|k| arrays[k][j]), ids[j])
+    };
+    let far: Vec<([f64; M], u32)> = (order.iter().enumerate())
+        .filter(|&(i, &j)| j as usize + reach < i)
+        .map(|(_, &j)| read(&arrays, ids, j as usize))
+        .collect();
+    let mut far = far.into_iter();
+    let mut ring = vec![([0.0; M], 0_u32); ring_len];
+    for (j, saved) in ring.iter_mut().enumerate().take(reach.min(n)) {
+        *saved = read(&arrays, ids, j);
+    }
+    for (i, &j) in order.iter().enumerate() {
+        let j = j as usize;
+        if i + reach < n {
+            ring[(i + reach) & mask] = read(&arrays, ids, i + reach);
+        }
+        let (values, id) = if j <= i + reach && j + reach >= i {
+            ring[j & mask]
+        } else if j > i {
+            read(&arrays, ids, j)
+        } else {
+            far.next()
+                .expect("every disk stored far before its slot was saved")
+        };
+        for (array, value) in arrays.iter_mut().zip(values) {
+            array[i] = value;
+        }
+        ids[i] = id;
+    }
+}
+
 /// Replaces each storage index in `slots` with the id of the disk stored there: the ids
 /// in a new order, [`gather`] done in place into the order itself.
 pub fn label_in_place(ids: &[u32], slots: &mut [u32]) {
@@ -440,6 +501,47 @@ impl Particles {
             spare: &mut spare,
         };
         self.gather_arrays(scratch, gather, label_in_place);
+    }
+
+    /// Stores the disks in the new order `scratch.order` (old storage indices, each
+    /// once), when nearly every disk was stored within `reach` slots of its new one: in
+    /// place in one pass ([`permute_in_place`]), which reads and writes each array once.
+    /// When more than one disk in [`MAX_FAR_SHARE`] was stored further (a scene's first
+    /// re-storing, from placement order), the arrays are gathered one by one in the
+    /// scratch instead ([`Particles::gather_arrays`]). Either leaves the same disks in
+    /// the same slots.
+    pub fn store_in_order(&mut self, scratch: ReorderScratch<'_>, reach: usize) {
+        let reach = reach.min(MAX_PERMUTE_REACH);
+        let order = &*scratch.order;
+        let far = (order.iter().enumerate())
+            .filter(|&(slot, &idx)| slot.abs_diff(idx as usize) > reach)
+            .count();
+        if far * MAX_FAR_SHARE > order.len() {
+            self.gather_arrays(scratch, gather, label_in_place);
+            return;
+        }
+        let Particles {
+            id,
+            x,
+            y,
+            vx,
+            vy,
+            radius,
+            mass,
+        } = self;
+        let [x, y, vx, vy] = [&mut x[..], &mut y[..], &mut vx[..], &mut vy[..]];
+        match (radius, mass) {
+            (PerDisk::Each(radius), PerDisk::Each(mass)) => {
+                permute_in_place([x, y, vx, vy, radius, mass], id, order, reach);
+            }
+            (PerDisk::Each(values), PerDisk::Shared { .. })
+            | (PerDisk::Shared { .. }, PerDisk::Each(values)) => {
+                permute_in_place([x, y, vx, vy, values], id, order, reach);
+            }
+            (PerDisk::Shared { .. }, PerDisk::Shared { .. }) => {
+                permute_in_place([x, y, vx, vy], id, order, reach);
+            }
+        }
     }
 
     /// Stores the disks in the new order `scratch.order` (old storage indices, each
@@ -651,6 +753,76 @@ mod tests {
         assert_eq!(lens(&shared), [3, 1]);
         assert_eq!(lens(&each), [3, 1]);
         assert_eq!(shared.map(|r| r * 2.0).shared(), Some(3.0));
+    }
+
+    /// A re-storing in place puts every disk where gathering each array whole does:
+    /// disks stored a few slots either side of their new one and at the ring's edges
+    /// (read from the ring), one slot past them (read in place ahead, saved before the
+    /// pass behind) and far off, with shared or per-disk radii and masses; and an order
+    /// that scatters every disk, which is gathered whole.
+    #[test]
+    fn a_restoring_in_place_stores_the_disks_as_gathering_does() {
+        let n = 1000_u32;
+        // A ring of 32 slots: those within 15 of the one written.
+        let reach = 15;
+        let mut near: Vec<u32> = (0..n).collect();
+        for pair in near[..400].chunks_mut(2) {
+            pair.swap(0, 1);
+        }
+        near[20..40].rotate_left(13);
+        // Slot 500 takes the disk 15 before it, 485 the one 15 after it: the ring's edges.
+        near.swap(485, 500);
+        // One past the edges: 16 before, 16 after.
+        near.swap(584, 600);
+        // Far: slot 10 takes disk 900, slot 900 disk 10.
+        near.swap(10, 900);
+        let scattered: Vec<u32> = (0..n).map(|k| k * 7919 % n).collect();
+
+        let values =
+            |k: usize| -> Vec<f64> { (0..n).map(|i| f64::from(i) + k as f64 * 0.25).collect() };
+        let mut arrays: [Vec<f64>; 5] = std::array::from_fn(values);
+        let mut ids: Vec<u32> = (0..n).map(|i| i * 3).collect();
+        let expected: Vec<Vec<f64>> = arrays
+            .iter()
+            .map(|a| near.iter().map(|&j| a[j as usize]).collect())
+            .collect();
+        let expected_ids: Vec<u32> = near.iter().map(|&j| ids[j as usize]).collect();
+        let [a, b, c, d, e] = &mut arrays;
+        permute_in_place([a, b, c, d, e], &mut ids, &near, reach);
+        assert_eq!(arrays.to_vec(), expected, "values in place");
+        assert_eq!(ids, expected_ids, "ids in place");
+
+        for unequal in [false, true] {
+            let disks: Vec<Disk> = (0..n)
+                .map(|k| Disk {
+                    x: f64::from(k),
+                    y: f64::from(k) * 0.5,
+                    vx: -f64::from(k),
+                    vy: f64::from(k) * 2.0,
+                    radius: if unequal {
+                        1.0 + f64::from(k) * 1e-3
+                    } else {
+                        1.0
+                    },
+                    mass: if unequal {
+                        2.0 + f64::from(k) * 1e-3
+                    } else {
+                        2.0
+                    },
+                })
+                .collect();
+            for order in [&near, &scattered] {
+                let mut gathered = Particles::from_disks(&disks);
+                gathered.reorder(order);
+                let mut in_place = Particles::from_disks(&disks);
+                let scratch = ReorderScratch {
+                    order: &mut order.clone(),
+                    spare: &mut vec![0.0; n as usize],
+                };
+                in_place.store_in_order(scratch, reach);
+                assert_eq!(in_place, gathered, "unequal disks: {unequal}");
+            }
+        }
     }
 
     /// Visiting in id order a block of ids at a time gives the order of the whole index,
