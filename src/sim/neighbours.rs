@@ -482,12 +482,13 @@ impl PairList {
 /// Runs `work`, a re-storing of `n_disks` disks, in scratch memory, and leaves every one
 /// of `lists` empty, to be rebuilt. A re-storing needs 12 bytes per disk: 4 for the new
 /// order and 8 for a spare array of values (one in place, the serial stepper's once the
-/// disks are near grid order, uses only the order: `Particles::store_in_order`). Lists about to be rebuilt lend their memory
-/// when it holds that much: one list both parts (the serial stepper's in a dense gas
-/// holds some 20 bytes per disk), or one the order and another the values (the two
-/// band lists of two threads hold some 10 each). Then the re-storing takes no memory
-/// and the lists, rebuilt into the same pages, wait for no fresh ones (at 10⁷ disks the
-/// kernel's page faults made one scan in two a third slower). A lone list too short
+/// disks are near grid order, uses only the order: `Particles::store_in_order`). Lists
+/// about to be rebuilt lend their memory when it holds that much: one list both parts
+/// (the serial stepper's in a dense gas holds some 20 bytes per disk), or one the order
+/// and another the values (the two band lists of two threads hold some 10 each). Then
+/// the re-storing takes no memory and the lists, rebuilt into the same pages, wait for
+/// no fresh ones (at 10⁷ disks the kernel's page faults made one scan in two a third
+/// slower). A lone list too short
 /// (the serial stepper's or a rank's in a dilute gas, some 4 bytes per disk) grows to
 /// 12 and keeps that room: fresh scratch for 10⁷ disks came from new pages at every
 /// re-storing (too large for the allocator to keep), and a serial run at packing 0.05
