@@ -488,9 +488,8 @@ impl PairList {
 /// and another the values (the two band lists of two threads hold some 10 each). Then
 /// the re-storing takes no memory and the lists, rebuilt into the same pages, wait for
 /// no fresh ones (at 10⁷ disks the kernel's page faults made one scan in two a third
-/// slower). A lone list too short
-/// (the serial stepper's or a rank's in a dilute gas, some 4 bytes per disk) grows to
-/// 12 and keeps that room: fresh scratch for 10⁷ disks came from new pages at every
+/// slower). A lone list too short (the serial stepper's or a rank's in a dilute gas,
+/// some 4 bytes per disk) grows to 12 and keeps that room: fresh scratch for 10⁷ disks came from new pages at every
 /// re-storing (too large for the allocator to keep), and a serial run at packing 0.05
 /// took 1.09 times as long; the peak memory, set by the re-storing, is the same.
 /// Otherwise every list is released and the scratch is fresh memory, taking their

@@ -261,8 +261,8 @@ pub fn gather<T: Copy>(values: &[T], order: &[u32], into: &mut [T]) {
     }
 }
 
-/// A re-storing in place ([`Particles::store_in_order`]) gathers the arrays whole
-/// instead when more than one disk in this many was stored far from its new slot.
+/// A re-storing in place ([`permute_in_place`]) gives way to gathering the arrays whole
+/// when more than one disk in this many was stored far before its new slot.
 const MAX_FAR_SHARE: usize = 64;
 
 /// The furthest from its new slot a re-storing in place reads a disk from its ring
@@ -271,32 +271,39 @@ const MAX_FAR_SHARE: usize = 64;
 const MAX_PERMUTE_REACH: usize = (1 << 15) - 1;
 
 /// Puts into slot i of `arrays` and `ids` what was at `order[i]` (a permutation), in
-/// place, in one pass. The old values of the slots within `reach` (or a little more) of
-/// the one written are held in a ring, each saved before its slot is written, so a disk
-/// stored that near its new slot is read from the ring; one stored further after it is
-/// read from its array (not yet written there), one further before it from values saved
-/// before the pass. The ring, not the arrays, takes the scattered reads: at 10⁷ disks
-/// (packing 0.3) this took 4.4–4.7 ns per disk where gathering each array whole into a
-/// spare one took 7.7.
+/// place, in one pass, and returns true; or, when more than one disk in
+/// [`MAX_FAR_SHARE`] was stored far before its new slot, returns false having written
+/// nothing. The old values of the slots within `reach` (or a little more, at most
+/// [`MAX_PERMUTE_REACH`]) of the one written are held in a ring, each saved before its
+/// slot is written, so a disk stored that near its new slot is read from the ring; one
+/// stored further after it is read from its array (not yet written there), one further
+/// before it from values saved before the pass. The ring, not the arrays, takes the
+/// scattered reads: at 10⁷ disks (packing 0.3) this took 4.4–4.7 ns per disk where
+/// gathering each array whole into a spare one took 7.7.
 fn permute_in_place<const M: usize>(
     mut arrays: [&mut [f64]; M],
     ids: &mut [u32],
     order: &[u32],
     reach: usize,
-) {
+) -> bool {
     let n = order.len();
     assert!(arrays.iter().all(|values| values.len() == n) && ids.len() == n);
-    let ring_len = (2 * reach + 2).next_power_of_two();
+    let ring_len = (2 * reach.min(MAX_PERMUTE_REACH) + 2).next_power_of_two();
     let mask = ring_len - 1;
     // The ring holds the slots from `i - reach` to `i + reach` while slot i is written.
     let reach = ring_len / 2 - 1;
     let read = |arrays: &[&mut [f64]; M], ids: &[u32], j: usize| {
         (std::array::from_fn(|k| arrays[k][j]), ids[j])
     };
-    let far: Vec<([f64; M], u32)> = (order.iter().enumerate())
-        .filter(|&(i, &j)| j as usize + reach < i)
-        .map(|(_, &j)| read(&arrays, ids, j as usize))
-        .collect();
+    let mut far: Vec<([f64; M], u32)> = Vec::new();
+    for (i, &j) in order.iter().enumerate() {
+        if j as usize + reach < i {
+            if (far.len() + 1) * MAX_FAR_SHARE > n {
+                return false;
+            }
+            far.push(read(&arrays, ids, j as usize));
+        }
+    }
     let mut far = far.into_iter();
     let mut ring = vec![([0.0; M], 0_u32); ring_len];
     for (j, saved) in ring.iter_mut().enumerate().take(reach.min(n)) {
@@ -320,6 +327,7 @@ fn permute_in_place<const M: usize>(
         }
         ids[i] = id;
     }
+    true
 }
 
 /// Replaces each storage index in `slots` with the id of the disk stored there: the ids
@@ -504,22 +512,13 @@ impl Particles {
     }
 
     /// Stores the disks in the new order `scratch.order` (old storage indices, each
-    /// once), when nearly every disk was stored within `reach` slots of its new one: in
-    /// place in one pass ([`permute_in_place`]), which reads and writes each array once.
-    /// When more than one disk in [`MAX_FAR_SHARE`] was stored further (a scene's first
-    /// re-storing, from placement order), the arrays are gathered one by one in the
-    /// scratch instead ([`Particles::gather_arrays`]). Either leaves the same disks in
-    /// the same slots.
+    /// once), most of them stored within `reach` slots of their new one: in place in one
+    /// pass ([`permute_in_place`]), which reads and writes each array once; or, when too
+    /// many were stored far from it (a scene's first re-storing, from placement order),
+    /// by gathering the arrays one by one in the scratch ([`Particles::gather_arrays`]).
+    /// Either leaves the same disks in the same slots.
     pub fn store_in_order(&mut self, scratch: ReorderScratch<'_>, reach: usize) {
-        let reach = reach.min(MAX_PERMUTE_REACH);
         let order = &*scratch.order;
-        let far = (order.iter().enumerate())
-            .filter(|&(slot, &idx)| slot.abs_diff(idx as usize) > reach)
-            .count();
-        if far * MAX_FAR_SHARE > order.len() {
-            self.gather_arrays(scratch, gather, label_in_place);
-            return;
-        }
         let Particles {
             id,
             x,
@@ -528,19 +527,22 @@ impl Particles {
             vy,
             radius,
             mass,
-        } = self;
+        } = &mut *self;
         let [x, y, vx, vy] = [&mut x[..], &mut y[..], &mut vx[..], &mut vy[..]];
-        match (radius, mass) {
+        let in_place = match (radius, mass) {
             (PerDisk::Each(radius), PerDisk::Each(mass)) => {
-                permute_in_place([x, y, vx, vy, radius, mass], id, order, reach);
+                permute_in_place([x, y, vx, vy, radius, mass], id, order, reach)
             }
             (PerDisk::Each(values), PerDisk::Shared { .. })
             | (PerDisk::Shared { .. }, PerDisk::Each(values)) => {
-                permute_in_place([x, y, vx, vy, values], id, order, reach);
+                permute_in_place([x, y, vx, vy, values], id, order, reach)
             }
             (PerDisk::Shared { .. }, PerDisk::Shared { .. }) => {
-                permute_in_place([x, y, vx, vy], id, order, reach);
+                permute_in_place([x, y, vx, vy], id, order, reach)
             }
+        };
+        if !in_place {
+            self.gather_arrays(scratch, gather, label_in_place);
         }
     }
 
@@ -788,9 +790,19 @@ mod tests {
             .collect();
         let expected_ids: Vec<u32> = near.iter().map(|&j| ids[j as usize]).collect();
         let [a, b, c, d, e] = &mut arrays;
-        permute_in_place([a, b, c, d, e], &mut ids, &near, reach);
+        assert!(permute_in_place([a, b, c, d, e], &mut ids, &near, reach));
         assert_eq!(arrays.to_vec(), expected, "values in place");
         assert_eq!(ids, expected_ids, "ids in place");
+        // Scattered: given way to gathering, nothing written.
+        let [a, b, c, d, e] = &mut arrays;
+        assert!(!permute_in_place(
+            [a, b, c, d, e],
+            &mut ids,
+            &scattered,
+            reach
+        ));
+        assert_eq!(arrays.to_vec(), expected, "values untouched");
+        assert_eq!(ids, expected_ids, "ids untouched");
 
         for unequal in [false, true] {
             let disks: Vec<Disk> = (0..n)
