@@ -49,23 +49,22 @@ pub struct Measured {
 /// `cargo bench --features mpi --bench kernels -- '^(step|event)/'` on one idle machine
 /// (docs/accuracy.md, Choosing automatically), both methods in the same runs so that
 /// their rates compare even where the machine differs: the median of three runs within
-/// 20 minutes (2026-11-26, 09:21–09:40 UTC, an AMD EPYC VM that ran the step method
-/// 1.34–1.48× and the event method 1.2–2.1× faster than the one of the table before;
-/// the runs differed by up to 8% in the step rates, 25% in the event rates at 10⁵ and
-/// more in the observation rates at 10⁵).
+/// 10 minutes (2026-11-26, 22:25–22:35 UTC, an AMD EPYC VM; the runs differed by up to
+/// 5% in the step rates, 50% in the event rates at 10⁵ and threefold in the observation
+/// rates at 10⁵, which depend on where the state lies in the caches).
 /// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [
-        measured(1e4, 0.05, 183.6e6, 1.151e6, 600e6),
-        measured(1e4, 0.3, 95.5e6, 2.096e6, 597e6),
+        measured(1e4, 0.05, 176.6e6, 1.135e6, 600e6),
+        measured(1e4, 0.3, 91.8e6, 2.072e6, 610e6),
     ],
     [
-        measured(1e5, 0.05, 181.2e6, 0.481e6, 254e6),
-        measured(1e5, 0.3, 93.3e6, 0.961e6, 387e6),
+        measured(1e5, 0.05, 176.4e6, 0.586e6, 174e6),
+        measured(1e5, 0.3, 91.7e6, 1.127e6, 343e6),
     ],
     [
-        measured(1e6, 0.05, 147.2e6, 0.277e6, 103e6),
-        measured(1e6, 0.3, 74.0e6, 0.562e6, 123e6),
+        measured(1e6, 0.05, 148.8e6, 0.278e6, 103e6),
+        measured(1e6, 0.3, 77.0e6, 0.540e6, 124e6),
     ],
 ];
 
