@@ -238,6 +238,22 @@ impl Skin {
     /// ([`Skin::tracking`]), or, if the disks were not moved through it since, marks
     /// now. Afterwards [`Skin::escapees`] may ask which disks escaped.
     pub fn largest_displacement_sq(&mut self, particles: &Particles, domain: &Domain) -> f64 {
+        self.largest_displacement_sq_with(particles, domain, |farthest| {
+            farthest(0..particles.len())
+        })
+    }
+
+    /// [`Skin::largest_displacement_sq`], the escapees measured by `measure` with the
+    /// search it is given: over the disks of a range (starting at a block boundary), the
+    /// square of the farthest escapee's displacement, 0 if none. In one piece or in
+    /// pieces (a parallel backend's), the pieces' results taken together with [`larger`]:
+    /// the same result however the disks are cut.
+    pub fn largest_displacement_sq_with(
+        &mut self,
+        particles: &Particles,
+        domain: &Domain,
+        measure: impl FnOnce(&(dyn Fn(Range<usize>) -> f64 + Sync)) -> f64,
+    ) -> f64 {
         if !self.is_built_for(particles) {
             return f64::INFINITY;
         }
@@ -245,12 +261,16 @@ impl Skin {
             self.displacements()
                 .measure(&particles.x, &particles.y, domain);
         }
-        let mut largest = 0.0;
-        self.for_each_escapee(0..particles.len(), |idx| {
-            let (x0, y0) = (f64::from(self.x_built[idx]), f64::from(self.y_built[idx]));
-            let (dx, dy) = domain.separation(x0, y0, particles.x[idx], particles.y[idx]);
-            largest = larger(largest, dx * dx + dy * dy);
-        });
+        let farthest = |range: Range<usize>| {
+            let mut largest = 0.0;
+            self.for_each_escapee(range, |idx| {
+                let (x0, y0) = (f64::from(self.x_built[idx]), f64::from(self.y_built[idx]));
+                let (dx, dy) = domain.separation(x0, y0, particles.x[idx], particles.y[idx]);
+                largest = larger(largest, dx * dx + dy * dy);
+            });
+            largest
+        };
+        let largest = measure(&farthest);
         if largest > 0.0 {
             // Measured from the rounded record: the true distance may be longer.
             let bound = largest.sqrt() + self.rounding;
@@ -623,7 +643,7 @@ mod tests {
     /// and through a periodic edge.
     #[test]
     fn a_rounded_record_misses_no_escapee_far_from_the_origin() {
-        use crate::sim::neighbours::Skin;
+        use crate::sim::neighbours::{Skin, larger};
         use crate::sim::particles::Disk;
         use crate::sim::scene::Domain;
         for boundary in [Boundary::Walls, Boundary::Periodic] {
@@ -668,6 +688,16 @@ mod tests {
                 }
             }
             let largest_sq = skin.largest_displacement_sq(&moved, &domain);
+            // As a parallel backend measures it: in pieces, the largest in the last.
+            let in_pieces = skin.largest_displacement_sq_with(&moved, &domain, |farthest| {
+                let pieces = (0..n).step_by(128).map(|start| start..(start + 128).min(n));
+                pieces.map(farthest).fold(0.0, larger)
+            });
+            assert_eq!(
+                in_pieces.to_bits(),
+                largest_sq.to_bits(),
+                "{boundary:?}: in pieces"
+            );
             assert!(
                 largest_sq >= true_largest * true_largest,
                 "{boundary:?}: reported {} for a true {true_largest}",
