@@ -80,6 +80,26 @@ fn rayon_with_coarse_steps_gives_the_serial_hash() {
     }
 }
 
+/// A scene large enough for the rayon backend to measure the lists' largest
+/// displacement in parallel pieces, with steps coarse enough that disks escape the lists
+/// and queries reach as far as that displacement says.
+#[test]
+fn rayon_on_a_large_scene_with_coarse_steps_gives_the_serial_hash() {
+    let gas = GasSpec {
+        seed: 5,
+        ..GasSpec::unit(70_000, 0.3)
+    };
+    let spec = RunSpec {
+        method: MethodSpec::stepped(0.6, 30, Broadphase::Grid),
+        ..run_spec(gas, Broadphase::Grid)
+    };
+    let reference = serial::run(&spec).unwrap().summary;
+    for n in [2, 3] {
+        let summary = threads::run(&spec, threads(n)).unwrap().summary;
+        assert_eq!(summary.state_hash, reference.state_hash, "{n} threads");
+    }
+}
+
 #[test]
 fn rayon_all_pairs_and_gravity_give_the_serial_hash() {
     let mut gas = GasSpec {

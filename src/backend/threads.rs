@@ -45,6 +45,13 @@ use crate::sim::{
 /// Disks per parallel chunk of the per-disk stage: large enough to amortise scheduling.
 const MIN_CHUNK: usize = 4096;
 
+/// Scenes from this many disks on measure the largest displacement since the lists'
+/// build in the move's pieces, in parallel: on one thread it took 0.14–0.16 ns per
+/// disk-step at 10⁶ disks and packing 0.3, in pieces 0.06 (`docs/performance.md`). A
+/// smaller scene's takes a few µs a step on one thread, about what another phase of
+/// the team costs: at 2·10⁴ disks the pieces measured 0.971–0.978 of one thread.
+const PARALLEL_LARGEST_DISKS: usize = 1 << 16;
+
 /// A pool of exactly `threads` threads for one run (never the global pool).
 pub fn pool(threads: NonZeroUsize) -> Result<rayon::ThreadPool, BackendError> {
     rayon::ThreadPoolBuilder::new()
@@ -305,18 +312,18 @@ impl ThreadedStepper {
     fn contacts_of_escapees(&mut self, particles: &mut Particles, team: &Team<'_>) -> Vec<Contact> {
         let n = particles.len();
         self.touched.resize(n, false);
-        // The escapees' displacements measured in the move's pieces, in parallel: on one
-        // thread this took 0.14–0.16 ns per disk-step at 10⁶ disks and packing 0.3, in
-        // pieces 0.06 (`docs/performance.md`).
-        let chunk = self.chunk(n);
-        let largest_sq =
+        let largest_sq = if n >= PARALLEL_LARGEST_DISKS {
+            let chunk = self.chunk(n);
             self.skin
                 .largest_displacement_sq_with(particles, &self.domain, |farthest| {
                     let pieces = (0..n)
                         .step_by(chunk)
                         .map(|start| start..(start + chunk).min(n));
                     team.map(pieces, farthest).into_iter().fold(0.0, larger)
-                });
+                })
+        } else {
+            self.skin.largest_displacement_sq(particles, &self.domain)
+        };
         let (skin, domain, now) = (&self.skin, &self.domain, &*particles);
         if !skin.is_exceeded(largest_sq) {
             return Vec::new();
