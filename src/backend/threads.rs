@@ -47,9 +47,10 @@ const MIN_CHUNK: usize = 4096;
 
 /// Scenes from this many disks on measure the largest displacement since the lists'
 /// build in the move's pieces, in parallel: on one thread it took 0.14–0.16 ns per
-/// disk-step at 10⁶ disks and packing 0.3, in pieces 0.06 (`docs/performance.md`). A
-/// smaller scene's takes a few µs a step on one thread, about what another phase of
-/// the team costs: at 2·10⁴ disks the pieces measured 0.971–0.978 of one thread.
+/// disk-step at 10⁶ disks and packing 0.3, in pieces 0.06 (`docs/performance.md`). At
+/// 2·10⁴ disks, runs with the pieces went 0.971–0.978 times as fast as runs without
+/// (there the part takes a few µs a step on one thread; another phase of the team
+/// costing as much is the likely reason, not measured alone).
 const PARALLEL_LARGEST_DISKS: usize = 1 << 16;
 
 /// A pool of exactly `threads` threads for one run (never the global pool).
