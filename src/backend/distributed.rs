@@ -34,6 +34,7 @@ use crate::sim::grid::{
 use crate::sim::neighbours::{PairList, Skin, larger, with_reorder_scratch};
 use crate::sim::observe::observe;
 use crate::sim::particles::PACKED_LEN;
+use crate::sim::pieces::InTurn;
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::{ContactSchedule, DiskSet};
 use crate::sim::step::{ReorderSchedule, advance_disks};
@@ -478,7 +479,7 @@ impl RankState {
             let (grid, particles) = (&mut self.grid, &mut self.particles);
             let lists = std::slice::from_mut(&mut self.list);
             with_reorder_scratch(lists, particles.len(), |scratch| {
-                grid.store_in_grid_order(particles, scratch);
+                grid.store_in_grid_order(particles, scratch, &InTurn);
             });
         }
     }

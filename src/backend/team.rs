@@ -40,6 +40,8 @@ use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::thread::Thread;
 use std::time::{Duration, Instant};
 
+use crate::sim::pieces::Pieces;
+
 /// How long a member polls for the next phase before it parks: through the serial
 /// pieces of a step and the loop between steps (drawing a step offscreen included);
 /// not so long that a team left idle keeps a core busy for more than a moment.
@@ -134,6 +136,17 @@ impl Team<'_> {
         if let Ok(Some(payload)) = panic {
             resume_unwind(payload);
         }
+    }
+}
+
+/// The core's passes in pieces ([`Pieces`]) spread over the team.
+impl Pieces for Team<'_> {
+    fn workers(&self) -> usize {
+        self.n_members() + 1
+    }
+
+    fn for_each<T: Send>(&self, items: &mut [T], task: impl Fn(&mut T) + Sync) {
+        Team::for_each(self, items, task);
     }
 }
 

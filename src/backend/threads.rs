@@ -33,7 +33,6 @@ use crate::sim::neighbours::{
     with_reorder_scratch,
 };
 use crate::sim::observe::observe;
-use crate::sim::particles::{gather, label_in_place};
 use crate::sim::prefetch::prefetch;
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::{ContactSchedule, DiskSet};
@@ -420,20 +419,10 @@ impl ThreadedStepper {
         });
         if self.reorder.count_build() {
             // The lists are rebuilt next: the re-storing works in their memory, as the
-            // serial stepper's does.
+            // serial stepper's does, in pieces over the team.
             let grid = &mut self.grid;
             with_reorder_scratch(&mut self.lists, particles.len(), |scratch| {
-                grid.store_in_grid_order_with(particles, scratch, |particles, scratch| {
-                    particles.gather_arrays(
-                        scratch,
-                        |values, order, into| {
-                            in_chunks(team, into, |start, into| {
-                                gather(values, &order[start..start + into.len()], into)
-                            })
-                        },
-                        |ids, slots| in_chunks(team, slots, |_, slots| label_in_place(ids, slots)),
-                    );
-                });
+                grid.store_in_grid_order(particles, scratch, team);
             });
         }
         bands
@@ -511,16 +500,6 @@ impl ThreadedStepper {
             |_| {},
         );
     }
-}
-
-/// `pass(start, chunk)` on the chunks of [`MIN_CHUNK`] values of `values` over the
-/// team, `start` the index of a chunk's first value (the re-storing's gathers and
-/// labelling).
-fn in_chunks<T: Send>(team: &Team<'_>, values: &mut [T], pass: impl Fn(usize, &mut [T]) + Sync) {
-    let mut chunks: Vec<_> = values.chunks_mut(MIN_CHUNK).enumerate().collect();
-    team.for_each(&mut chunks, |(index, chunk)| {
-        pass(*index * MIN_CHUNK, chunk)
-    });
 }
 
 /// Cuts the owned strips (global index 0 first) into the given bands, each with the

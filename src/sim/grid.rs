@@ -7,6 +7,7 @@
 use std::ops::{Range, RangeInclusive};
 
 use super::particles::{Particles, ReorderScratch};
+use super::pieces::Pieces;
 use super::scene::{Boundary, Domain, minimum_image};
 
 /// An overlapping pair: the storage indices of its two disks, in either order. Every
@@ -298,33 +299,42 @@ impl StripGrid {
 
     /// Re-stores `particles` (the disks of the owned strips, as of the last build) in
     /// grid order (strip, then x), working in `scratch`, and points the entries to their
-    /// new slots. Results do not change: pair order and sums go by id, not storage.
-    pub fn store_in_grid_order(&mut self, particles: &mut Particles, scratch: ReorderScratch<'_>) {
-        // A disk that changed strips since it was stored moved by about a strip's length.
-        let longest = self.strips[..self.n_owned].iter().map(Vec::len).max();
-        let reach = longest.unwrap_or(0) * 9 / 8;
-        self.store_in_grid_order_with(particles, scratch, |particles, scratch| {
-            particles.store_in_order(scratch, reach);
-        });
-    }
-
-    /// [`StripGrid::store_in_grid_order`], the disks stored in the new order (written
-    /// into `scratch.order`) by `store` (in one piece or in pieces, a parallel backend's:
-    /// [`Particles::gather_arrays`]).
-    pub fn store_in_grid_order_with(
+    /// new slots, in one piece or many (`pieces`). Results do not change: pair order and
+    /// sums go by id, not storage.
+    pub fn store_in_grid_order(
         &mut self,
         particles: &mut Particles,
         scratch: ReorderScratch<'_>,
-        store: impl FnOnce(&mut Particles, ReorderScratch<'_>),
+        pieces: &impl Pieces,
     ) {
         assert_eq!(scratch.order.len(), self.len(), "an order of every disk");
-        // One pass: each entry's disk goes to the next slot, which the entry then names.
-        let entries = self.strips[..self.n_owned].iter_mut().flatten();
-        for ((slot, order), entry) in scratch.order.iter_mut().enumerate().zip(entries) {
-            *order = entry.idx;
-            entry.idx = slot as u32;
+        // Whole strips per piece, about as many entries in each.
+        let per_piece = self.len().div_ceil(pieces.workers()).max(1);
+        let owned = &mut self.strips[..self.n_owned];
+        // A disk that changed strips since it was stored moved by about a strip's length.
+        let reach = owned.iter().map(Vec::len).max().unwrap_or(0) * 9 / 8;
+        let (mut strips, mut order, mut first) = (owned, &mut scratch.order[..], 0);
+        let mut cut = Vec::new();
+        while !strips.is_empty() {
+            let (mut n_strips, mut n_entries) = (0, 0);
+            while n_strips < strips.len() && n_entries < per_piece {
+                n_entries += strips[n_strips].len();
+                n_strips += 1;
+            }
+            let (piece_strips, after) = std::mem::take(&mut strips).split_at_mut(n_strips);
+            let (piece_order, order_after) = std::mem::take(&mut order).split_at_mut(n_entries);
+            cut.push((first, piece_strips, piece_order));
+            (strips, order, first) = (after, order_after, first + n_entries);
         }
-        store(particles, scratch);
+        // One pass: each entry's disk goes to the next slot, which the entry then names.
+        pieces.for_each(&mut cut, |(first, strips, order)| {
+            let entries = strips.iter_mut().flatten();
+            for ((slot, order), entry) in (*first..).zip(order.iter_mut()).zip(entries) {
+                *order = entry.idx;
+                entry.idx = slot as u32;
+            }
+        });
+        particles.store_in_order(scratch, reach, pieces);
     }
 
     /// The owned entries of the strip with global index `strip`, in x order.
@@ -1145,6 +1155,70 @@ mod tests {
         }
         pairs.sort_unstable();
         pairs
+    }
+
+    /// A re-storing in pieces (whole strips each, run last first) stores the disks and
+    /// names their new slots as one in one piece does: from placement order (gathered
+    /// whole), and, the disks moved a little, from near grid order (in place).
+    #[test]
+    fn a_restoring_in_pieces_stores_the_disks_as_in_one() {
+        use crate::sim::particles::ReorderScratch;
+        use crate::sim::pieces::{Backwards, InTurn};
+        use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution};
+        let scene = GasSpec {
+            radius: RadiusDistribution::Uniform { min: 0.5, max: 1.5 },
+            mass: MassRule::Area,
+            seed: 9,
+            ..GasSpec::unit(3000, 0.3)
+        }
+        .build()
+        .expect("places");
+        let n = scene.particles.len();
+        // The grid's entries and the disks after a re-storing in `pieces`.
+        fn stored(
+            grid: &StripGrid,
+            particles: &Particles,
+            pieces: &impl Pieces,
+        ) -> (StripGrid, Particles) {
+            let (mut grid, mut particles) = (grid.clone(), particles.clone());
+            let n = particles.len();
+            let (mut order, mut spare) = (vec![0; n], vec![0.0; n]);
+            let scratch = ReorderScratch {
+                order: &mut order,
+                spare: &mut spare,
+            };
+            grid.store_in_grid_order(&mut particles, scratch, pieces);
+            (grid, particles)
+        }
+        let entries = |grid: &StripGrid| -> Vec<Vec<Entry>> {
+            grid.owned()
+                .map(|strip| grid.strip_entries(strip).to_vec())
+                .collect()
+        };
+        let mut grid = StripGrid::new(&scene.domain, &scene.particles);
+        let mut particles = scene.particles.clone();
+        grid.build(&particles);
+        for round in ["from placement order", "from near grid order"] {
+            let (whole_grid, whole) = stored(&grid, &particles, &InTurn);
+            assert_ne!(whole.id, particles.id, "{round}: re-stored");
+            for workers in [2, 3, 7] {
+                let (cut_grid, cut) = stored(&grid, &particles, &Backwards(workers));
+                assert_eq!(cut, whole, "{round}, {workers} pieces: the disks");
+                assert_eq!(
+                    entries(&cut_grid),
+                    entries(&whole_grid),
+                    "{round}: the slots"
+                );
+            }
+            (grid, particles) = (whole_grid, whole);
+            let Domain { width, height, .. } = scene.domain;
+            for k in 0..n {
+                let turn = f64::from(particles.id[k]);
+                particles.x[k] = (particles.x[k] + 0.4 * turn.cos()).clamp(1.5, width - 1.5);
+                particles.y[k] = (particles.y[k] + 0.4 * turn.sin()).clamp(1.5, height - 1.5);
+            }
+            grid.build(&particles);
+        }
     }
 
     /// The exact search finds exactly the pairs of the all-pairs test, and a neighbour

@@ -1,6 +1,7 @@
 //! The pure simulation core: state, physics, broad phase and stepping.
 //!
-//! No I/O, no printing, no threads: backends wrap it, and a step cannot fail.
+//! No I/O, no printing, no threads: backends wrap it (a parallel one runs some of its
+//! passes in pieces at once, `pieces`), and a step cannot fail.
 
 pub mod calendar;
 pub mod cells;
@@ -13,6 +14,7 @@ pub mod grid;
 pub mod neighbours;
 pub mod observe;
 pub mod particles;
+pub mod pieces;
 pub mod pilot;
 pub mod prefetch;
 pub mod resolve;

@@ -579,6 +579,7 @@ fn lent_scratch(lists: &mut [PairList], n_disks: usize) -> Option<ReorderScratch
 mod tests {
     use crate::sim::grid::{Contact, StripGrid};
     use crate::sim::particles::Particles;
+    use crate::sim::pieces::InTurn;
     use crate::sim::scene::Scene;
     use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution, wrap_periodic};
     use crate::sim::{Boundary, Broadphase, Physics, StepParams, Stepper};
@@ -809,7 +810,8 @@ mod tests {
                 order: &mut order,
                 spare: &mut spare,
             };
-            grid.clone().store_in_grid_order(&mut in_fresh, scratch);
+            grid.clone()
+                .store_in_grid_order(&mut in_fresh, scratch, &InTurn);
             let halves = grid.bands(2);
             assert_eq!(halves.len(), 2, "two bands");
             let built = |strips: &[std::ops::Range<usize>]| -> Vec<PairList> {
@@ -838,7 +840,8 @@ mod tests {
                 );
                 let mut in_lists = scene.particles.clone();
                 with_reorder_scratch(&mut lists, n, |scratch| {
-                    grid.clone().store_in_grid_order(&mut in_lists, scratch);
+                    grid.clone()
+                        .store_in_grid_order(&mut in_lists, scratch, &InTurn);
                 });
                 assert!(lists.iter().all(|list| list.pairs.is_empty()), "left empty");
                 if let [list] = &lists[..] {

@@ -8,6 +8,7 @@
 
 use std::ops::{Index, Range};
 
+use super::pieces::{InTurn, Pieces};
 use super::prefetch::prefetch;
 
 /// Positions, velocities and properties of every disk, one `f64` array per quantity;
@@ -253,8 +254,26 @@ impl<'a> PerDiskSlice<'a> {
     }
 }
 
+/// Values per piece of a gather or labelling in pieces ([`in_pieces`]), at least.
+const MIN_GATHER_PIECE: usize = 4096;
+
+/// `pass(start, piece)` on pieces of `values` (`start` the index of a piece's first
+/// value): about four per worker of `pieces`, at least [`MIN_GATHER_PIECE`] values each.
+fn in_pieces<T: Send>(
+    pieces: &impl Pieces,
+    values: &mut [T],
+    pass: impl Fn(usize, &mut [T]) + Sync,
+) {
+    let size = values
+        .len()
+        .div_ceil(4 * pieces.workers())
+        .max(MIN_GATHER_PIECE);
+    let mut cut: Vec<_> = values.chunks_mut(size).enumerate().collect();
+    pieces.for_each(&mut cut, |(index, piece)| pass(*index * size, piece));
+}
+
 /// Fills `into` with the `values` at the indices `order` lists, in order (as many).
-pub fn gather<T: Copy>(values: &[T], order: &[u32], into: &mut [T]) {
+fn gather<T: Copy>(values: &[T], order: &[u32], into: &mut [T]) {
     debug_assert_eq!(order.len(), into.len());
     for (slot, &idx) in into.iter_mut().zip(order) {
         *slot = values[idx as usize];
@@ -270,69 +289,158 @@ const MAX_FAR_SHARE: usize = 64;
 /// has strips as long as the disks are many, and the ring is held whole.
 const MAX_PERMUTE_REACH: usize = (1 << 15) - 1;
 
+/// One disk's values in the `M` arrays of a re-storing in place, and its id.
+type Held<const M: usize> = ([f64; M], u32);
+
 /// Puts into slot i of `arrays` and `ids` what was at `order[i]` (a permutation), in
-/// place, in one pass, and returns true; or, when more than one disk in
-/// [`MAX_FAR_SHARE`] was stored far before its new slot, returns false having written
-/// nothing. The old values of the slots within `reach` (or a little more, at most
-/// [`MAX_PERMUTE_REACH`]) of the one written are held in a ring, each saved before its
-/// slot is written, so a disk stored that near its new slot is read from the ring; one
-/// stored further after it is read from its array (not yet written there), one further
-/// before it from values saved before the pass. The ring, not the arrays, takes the
-/// scattered reads: at 10⁷ disks (packing 0.3) this took 4.4–4.7 ns per disk where
-/// gathering each array whole into a spare one took 7.7.
+/// place, and returns true; or, when more than one disk in [`MAX_FAR_SHARE`] of a piece
+/// was stored far from its new slot, returns false having written nothing.
+///
+/// The slots are cut into `pieces.workers()` pieces, each written in one pass, the
+/// pieces perhaps at once. The old values of a piece's slots within `reach` (or a
+/// little more, at most [`MAX_PERMUTE_REACH`]) of the one written are held in a ring,
+/// each saved before its slot is written, so a disk stored that near its new slot is
+/// read from the ring; one stored further after it, in the same piece, is read from its
+/// array (not yet written there); any other, from values saved before any piece writes
+/// ([`save_out_of_reach`]). The ring, not the arrays, takes the scattered reads: at 10⁷
+/// disks (packing 0.3) this took 4.4–4.7 ns per disk where gathering each array whole
+/// into a spare one took 7.7.
 fn permute_in_place<const M: usize>(
-    mut arrays: [&mut [f64]; M],
+    arrays: [&mut [f64]; M],
     ids: &mut [u32],
     order: &[u32],
     reach: usize,
+    pieces: &impl Pieces,
 ) -> bool {
     let n = order.len();
     assert!(arrays.iter().all(|values| values.len() == n) && ids.len() == n);
     let ring_len = (2 * reach.min(MAX_PERMUTE_REACH) + 2).next_power_of_two();
-    let mask = ring_len - 1;
     // The ring holds the slots from `i - reach` to `i + reach` while slot i is written.
     let reach = ring_len / 2 - 1;
+    // Pieces at least a ring long: the values saved across their edges stay few.
+    let n_pieces = pieces.workers().min(n / ring_len).max(1);
+    let bounds: Vec<Range<usize>> = (0..n_pieces)
+        .map(|k| k * n / n_pieces..(k + 1) * n / n_pieces)
+        .collect();
+    let mut saved: Vec<Option<Vec<Held<M>>>> = vec![None; n_pieces];
+    {
+        let arrays = arrays.each_ref().map(|values| &**values);
+        let ids = &*ids;
+        let mut saving: Vec<_> = bounds.iter().zip(&mut saved).collect();
+        pieces.for_each(&mut saving, |(slots, saved)| {
+            **saved = save_out_of_reach(&arrays, ids, order, (*slots).clone(), reach);
+        });
+    }
+    let Some(saved) = saved.into_iter().collect::<Option<Vec<_>>>() else {
+        return false;
+    };
+    let mut rest = (arrays, ids, order);
+    let mut writes: Vec<_> = bounds
+        .iter()
+        .zip(saved)
+        .map(|(slots, saved)| {
+            let (arrays, ids, order) = &mut rest;
+            let values = arrays.each_mut().map(|values| {
+                let (piece, after) = std::mem::take(values).split_at_mut(slots.len());
+                *values = after;
+                piece
+            });
+            let (piece_ids, after) = std::mem::take(ids).split_at_mut(slots.len());
+            *ids = after;
+            let (piece_order, after) = order.split_at(slots.len());
+            *order = after;
+            (slots.start, values, piece_ids, piece_order, saved)
+        })
+        .collect();
+    pieces.for_each(&mut writes, |(first, arrays, ids, order, saved)| {
+        let mut saved = std::mem::take(saved).into_iter();
+        permute_piece(arrays, ids, order, *first, reach, ring_len, &mut saved);
+    });
+    true
+}
+
+/// Whether the disk stored at slot `j` is read from outside the ring and the arrays
+/// by the piece of slots `first..first + len` when it writes slot `i` (both indices
+/// within the piece's own: `i - first`, `j - first` wrapped): stored outside the piece,
+/// or more than `reach` slots before `i`.
+fn is_out_of_reach(i: usize, j: usize, len: usize, reach: usize) -> bool {
+    j >= len || j + reach < i
+}
+
+/// The old values (and ids) that the piece of slots `slots` reads from outside its ring
+/// and its own slots not yet written ([`is_out_of_reach`]), in the order it reads them;
+/// `None` when more than one in [`MAX_FAR_SHARE`] of its slots would read a disk stored
+/// more than `reach` slots from it.
+fn save_out_of_reach<const M: usize>(
+    arrays: &[&[f64]; M],
+    ids: &[u32],
+    order: &[u32],
+    slots: Range<usize>,
+    reach: usize,
+) -> Option<Vec<Held<M>>> {
+    let mut saved = Vec::new();
+    let mut far = 0;
+    for (i, &j) in slots.clone().zip(&order[slots.clone()]) {
+        let j = j as usize;
+        let local = j.wrapping_sub(slots.start);
+        if is_out_of_reach(i - slots.start, local, slots.len(), reach) {
+            if j + reach < i || j > i + reach {
+                far += 1;
+                if far * MAX_FAR_SHARE > slots.len() {
+                    return None;
+                }
+            }
+            saved.push((std::array::from_fn(|k| arrays[k][j]), ids[j]));
+        }
+    }
+    Some(saved)
+}
+
+/// Writes one piece of [`permute_in_place`]: slot `first + i` of the whole takes the
+/// disk stored at `order[i]`, read from the ring, from the piece's slot not yet written,
+/// or from `saved`.
+fn permute_piece<const M: usize>(
+    arrays: &mut [&mut [f64]; M],
+    ids: &mut [u32],
+    order: &[u32],
+    first: usize,
+    reach: usize,
+    ring_len: usize,
+    saved: &mut impl Iterator<Item = Held<M>>,
+) {
+    let n = order.len();
+    let mask = ring_len - 1;
     let read = |arrays: &[&mut [f64]; M], ids: &[u32], j: usize| {
         (std::array::from_fn(|k| arrays[k][j]), ids[j])
     };
-    let mut far: Vec<([f64; M], u32)> = Vec::new();
-    for (i, &j) in order.iter().enumerate() {
-        if j as usize + reach < i {
-            if (far.len() + 1) * MAX_FAR_SHARE > n {
-                return false;
-            }
-            far.push(read(&arrays, ids, j as usize));
-        }
-    }
-    let mut far = far.into_iter();
     let mut ring = vec![([0.0; M], 0_u32); ring_len];
-    for (j, saved) in ring.iter_mut().enumerate().take(reach.min(n)) {
-        *saved = read(&arrays, ids, j);
+    for (j, held) in ring.iter_mut().enumerate().take(reach.min(n)) {
+        *held = read(arrays, ids, j);
     }
     for (i, &j) in order.iter().enumerate() {
-        let j = j as usize;
         if i + reach < n {
-            ring[(i + reach) & mask] = read(&arrays, ids, i + reach);
+            ring[(i + reach) & mask] = read(arrays, ids, i + reach);
         }
-        let (values, id) = if j <= i + reach && j + reach >= i {
+        let j = (j as usize).wrapping_sub(first);
+        let (values, id) = if is_out_of_reach(i, j, n, reach) {
+            saved
+                .next()
+                .expect("every disk read from outside the ring was saved")
+        } else if j <= i + reach {
             ring[j & mask]
-        } else if j > i {
-            read(&arrays, ids, j)
         } else {
-            far.next()
-                .expect("every disk stored far before its slot was saved")
+            read(arrays, ids, j)
         };
         for (array, value) in arrays.iter_mut().zip(values) {
             array[i] = value;
         }
         ids[i] = id;
     }
-    true
 }
 
 /// Replaces each storage index in `slots` with the id of the disk stored there: the ids
 /// in a new order, [`gather`] done in place into the order itself.
-pub fn label_in_place(ids: &[u32], slots: &mut [u32]) {
+fn label_in_place(ids: &[u32], slots: &mut [u32]) {
     for slot in slots {
         *slot = ids[*slot as usize];
     }
@@ -508,7 +616,7 @@ impl Particles {
             order: &mut new_order.to_vec(),
             spare: &mut spare,
         };
-        self.gather_arrays(scratch, gather, label_in_place);
+        self.gather_arrays(scratch, &InTurn);
     }
 
     /// Stores the disks in the new order `scratch.order` (old storage indices, each
@@ -516,8 +624,13 @@ impl Particles {
     /// pass ([`permute_in_place`]), which reads and writes each array once; or, when too
     /// many were stored far from it (a scene's first re-storing, from placement order),
     /// by gathering the arrays one by one in the scratch ([`Particles::gather_arrays`]).
-    /// Either leaves the same disks in the same slots.
-    pub fn store_in_order(&mut self, scratch: ReorderScratch<'_>, reach: usize) {
+    /// Either leaves the same disks in the same slots, in one piece or many (`pieces`).
+    pub fn store_in_order(
+        &mut self,
+        scratch: ReorderScratch<'_>,
+        reach: usize,
+        pieces: &impl Pieces,
+    ) {
         let order = &*scratch.order;
         let Particles {
             id,
@@ -531,54 +644,54 @@ impl Particles {
         let [x, y, vx, vy] = [&mut x[..], &mut y[..], &mut vx[..], &mut vy[..]];
         let in_place = match (radius, mass) {
             (PerDisk::Each(radius), PerDisk::Each(mass)) => {
-                permute_in_place([x, y, vx, vy, radius, mass], id, order, reach)
+                permute_in_place([x, y, vx, vy, radius, mass], id, order, reach, pieces)
             }
             (PerDisk::Each(values), PerDisk::Shared { .. })
             | (PerDisk::Shared { .. }, PerDisk::Each(values)) => {
-                permute_in_place([x, y, vx, vy, values], id, order, reach)
+                permute_in_place([x, y, vx, vy, values], id, order, reach, pieces)
             }
             (PerDisk::Shared { .. }, PerDisk::Shared { .. }) => {
-                permute_in_place([x, y, vx, vy], id, order, reach)
+                permute_in_place([x, y, vx, vy], id, order, reach, pieces)
             }
         };
         if !in_place {
-            self.gather_arrays(scratch, gather, label_in_place);
+            self.gather_arrays(scratch, pieces);
         }
     }
 
     /// Stores the disks in the new order `scratch.order` (old storage indices, each
     /// once), without taking memory: every f64 array (and property held one per disk)
-    /// is gathered by `floats`, as [`gather`] does, into a buffer whose values were
-    /// already gathered (the first into `scratch.spare`, which is copied into the last
-    /// freed buffer at the end); the order is turned into the ids by `ids`, as
-    /// [`label_in_place`] does, and copied over them. Both scratch slices are left
-    /// holding values of no use.
-    pub fn gather_arrays(
-        &mut self,
-        scratch: ReorderScratch<'_>,
-        mut floats: impl FnMut(&[f64], &[u32], &mut [f64]),
-        ids: impl FnOnce(&[u32], &mut [u32]),
-    ) {
+    /// is gathered, in `pieces`, into a buffer whose values were already gathered (the
+    /// first into `scratch.spare`, which is copied into the last freed buffer at the
+    /// end); the order is turned into the ids ([`label_in_place`]) and copied over them.
+    /// Both scratch slices are left holding values of no use.
+    fn gather_arrays(&mut self, scratch: ReorderScratch<'_>, pieces: &impl Pieces) {
         let ReorderScratch { order, spare } = scratch;
         let n = self.len();
         assert_eq!(order.len(), n, "an order of every disk");
         assert_eq!(spare.len(), n, "a spare array of one value per disk");
+        let floats = |values: &[f64], into: &mut [f64]| {
+            in_pieces(pieces, into, |start, into| {
+                gather(values, &order[start..start + into.len()], into)
+            })
+        };
         {
             let (motion, properties) = self.arrays_mut();
             let per_disk = properties.into_iter().filter_map(PerDisk::values_mut);
             let mut arrays = motion.into_iter().chain(per_disk);
             if let Some(first) = arrays.next() {
-                floats(first, order, spare);
+                floats(first, spare);
                 // The first array's values are gathered: each next array goes into its
                 // buffer and hands over its own, which the first then holds.
                 for values in arrays {
-                    floats(values, order, first);
+                    floats(values, first);
                     std::mem::swap(first, values);
                 }
                 first.copy_from_slice(spare);
             }
         }
-        ids(&self.id, order);
+        let ids = &self.id;
+        in_pieces(pieces, order, |_, slots| label_in_place(ids, slots));
         self.id.copy_from_slice(order);
     }
 
@@ -695,6 +808,7 @@ impl Particles {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sim::pieces::Backwards;
 
     fn disk(x: f64, radius: f64) -> Disk {
         Disk {
@@ -761,7 +875,9 @@ mod tests {
     /// disks stored a few slots either side of their new one and at the ring's edges
     /// (read from the ring), one slot past them (read in place ahead, saved before the
     /// pass behind) and far off, with shared or per-disk radii and masses; and an order
-    /// that scatters every disk, which is gathered whole.
+    /// that scatters every disk, which is gathered whole. The same in pieces (run in
+    /// reverse), whose edges cut through disks read from the ring or ahead, and one that
+    /// reads only from the pieces after it.
     #[test]
     fn a_restoring_in_place_stores_the_disks_as_gathering_does() {
         let n = 1000_u32;
@@ -778,31 +894,64 @@ mod tests {
         near.swap(584, 600);
         // Far: slot 10 takes disk 900, slot 900 disk 10.
         near.swap(10, 900);
+        // Across the edge of two pieces (at 333 of three, 250 and 750 of four, 500 of two).
+        near[325..345].rotate_right(7);
+        near[740..760].rotate_left(12);
         let scattered: Vec<u32> = (0..n).map(|k| k * 7919 % n).collect();
 
         let values =
             |k: usize| -> Vec<f64> { (0..n).map(|i| f64::from(i) + k as f64 * 0.25).collect() };
-        let mut arrays: [Vec<f64>; 5] = std::array::from_fn(values);
-        let mut ids: Vec<u32> = (0..n).map(|i| i * 3).collect();
-        let expected: Vec<Vec<f64>> = arrays
-            .iter()
-            .map(|a| near.iter().map(|&j| a[j as usize]).collect())
-            .collect();
-        let expected_ids: Vec<u32> = near.iter().map(|&j| ids[j as usize]).collect();
-        let [a, b, c, d, e] = &mut arrays;
-        assert!(permute_in_place([a, b, c, d, e], &mut ids, &near, reach));
-        assert_eq!(arrays.to_vec(), expected, "values in place");
-        assert_eq!(ids, expected_ids, "ids in place");
-        // Scattered: given way to gathering, nothing written.
-        let [a, b, c, d, e] = &mut arrays;
-        assert!(!permute_in_place(
-            [a, b, c, d, e],
+        let first_ids: Vec<u32> = (0..n).map(|i| i * 3).collect();
+        for pieces in [1, 2, 3, 4, 5] {
+            let mut arrays: [Vec<f64>; 5] = std::array::from_fn(values);
+            let mut ids = first_ids.clone();
+            let expected: Vec<Vec<f64>> = arrays
+                .iter()
+                .map(|a| near.iter().map(|&j| a[j as usize]).collect())
+                .collect();
+            let expected_ids: Vec<u32> = near.iter().map(|&j| ids[j as usize]).collect();
+            let [a, b, c, d, e] = &mut arrays;
+            let arrays_now = [&mut a[..], b, c, d, e];
+            let cut = Backwards(pieces);
+            assert!(
+                permute_in_place(arrays_now, &mut ids, &near, reach, &cut),
+                "in place in {pieces} pieces"
+            );
+            assert_eq!(
+                arrays.to_vec(),
+                expected,
+                "values in place, {pieces} pieces"
+            );
+            assert_eq!(ids, expected_ids, "ids in place, {pieces} pieces");
+            // Scattered: given way to gathering, nothing written.
+            let [a, b, c, d, e] = &mut arrays;
+            let arrays_now = [&mut a[..], b, c, d, e];
+            assert!(!permute_in_place(
+                arrays_now, &mut ids, &scattered, reach, &cut
+            ));
+            assert_eq!(
+                arrays.to_vec(),
+                expected,
+                "values untouched, {pieces} pieces"
+            );
+            assert_eq!(ids, expected_ids, "ids untouched, {pieces} pieces");
+        }
+        // Every disk one slot on: each piece's last slot reads the next piece's first.
+        let shifted: Vec<u32> = (0..n).map(|k| (k + 1) % n).collect();
+        let mut arrays: [Vec<f64>; 1] = [values(0)];
+        let mut ids = first_ids.clone();
+        let [a] = &mut arrays;
+        assert!(permute_in_place(
+            [&mut a[..]],
             &mut ids,
-            &scattered,
-            reach
+            &shifted,
+            reach,
+            &Backwards(4)
         ));
-        assert_eq!(arrays.to_vec(), expected, "values untouched");
-        assert_eq!(ids, expected_ids, "ids untouched");
+        assert_eq!(
+            arrays[0],
+            shifted.iter().map(|&j| f64::from(j)).collect::<Vec<_>>()
+        );
 
         for unequal in [false, true] {
             let disks: Vec<Disk> = (0..n)
@@ -823,7 +972,7 @@ mod tests {
                     },
                 })
                 .collect();
-            for order in [&near, &scattered] {
+            for (order, pieces) in [&near, &scattered].into_iter().zip([1, 3]) {
                 let mut gathered = Particles::from_disks(&disks);
                 gathered.reorder(order);
                 let mut in_place = Particles::from_disks(&disks);
@@ -831,7 +980,7 @@ mod tests {
                     order: &mut order.clone(),
                     spare: &mut vec![0.0; n as usize],
                 };
-                in_place.store_in_order(scratch, reach);
+                in_place.store_in_order(scratch, reach, &Backwards(pieces));
                 assert_eq!(in_place, gathered, "unequal disks: {unequal}");
             }
         }

@@ -14,6 +14,7 @@ use super::neighbours::{
     DISPLACEMENT_BLOCK, Displacements, PairList, Skin, mark_escapees, with_reorder_scratch,
 };
 use super::particles::{DiskSlices, Particles, PerDiskSlice};
+use super::pieces::InTurn;
 use super::resolve::resolve_contacts;
 use super::scene::{Boundary, Domain, Physics, Scene, wrap_periodic};
 use super::schedule::ResolutionOrder;
@@ -246,7 +247,7 @@ impl Stepper {
             let grid = &mut self.grid;
             let lists = std::slice::from_mut(&mut self.neighbours);
             with_reorder_scratch(lists, particles.len(), |scratch| {
-                grid.store_in_grid_order(particles, scratch);
+                grid.store_in_grid_order(particles, scratch, &InTurn);
             });
         }
         let strips = self.grid.owned();
