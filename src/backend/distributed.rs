@@ -369,7 +369,7 @@ impl RankState {
         let immigrants = timed(&mut stages.communication, || comm.exchange(&emigrants));
         timed(&mut stages.broad_phase, || {
             self.migrate(comm.size(), &immigrants);
-            self.skin.record(&self.particles);
+            self.skin.record(&self.particles, &InTurn);
             self.mark_exported();
         });
     }
@@ -392,7 +392,7 @@ impl RankState {
         let n_own = self.particles.len();
         let moved_sq = self
             .skin
-            .largest_displacement_sq(&self.particles, &self.domain);
+            .largest_displacement_sq(&self.particles, &self.domain, &InTurn);
         self.escapees.clear();
         self.sent.clear(n_own);
         if self.skin.is_exceeded(moved_sq) && self.skin.may_reach(moved_sq) {

@@ -79,38 +79,6 @@ impl Team<'_> {
         self.shared.cursors.len() - 1
     }
 
-    /// Calls `task` once with each of `items`, spread over the team (each thread its
-    /// own share of them first, then any left); returns when every call has returned.
-    /// A panic in a call is raised again here, after the others have returned.
-    pub fn for_each<T: Send>(&self, items: &mut [T], task: impl Fn(&mut T) + Sync) {
-        let items = ItemsPtr(items.as_mut_ptr(), items.len());
-        let items = &items;
-        // SAFETY: `run` calls the closure with each index below the length once, so
-        // every `&mut` points to a different item, alive until `run` returns.
-        self.run(items.1, &|index| task(unsafe { &mut *items.0.add(index) }));
-    }
-
-    /// `task` of each item, in the items' order ([`Team::for_each`]).
-    pub fn map<T: Send, U: Send>(
-        &self,
-        items: impl IntoIterator<Item = T>,
-        task: impl Fn(T) -> U + Sync,
-    ) -> Vec<U> {
-        let mut slots: Vec<Slot<T, U>> = items.into_iter().map(Slot::Input).collect();
-        self.for_each(&mut slots, |slot| {
-            if let Slot::Input(item) = std::mem::replace(slot, Slot::Taken) {
-                *slot = Slot::Output(task(item));
-            }
-        });
-        slots
-            .into_iter()
-            .map(|slot| match slot {
-                Slot::Output(output) => output,
-                _ => unreachable!("every item was mapped"),
-            })
-            .collect()
-    }
-
     /// Calls `task(index)` for every index in `0..n_items` over the team. A member
     /// that has not joined by the time the leader has handed out every index is not
     /// waited for: a phase costs the leader no more than its items when the other
@@ -139,14 +107,22 @@ impl Team<'_> {
     }
 }
 
-/// The core's passes in pieces ([`Pieces`]) spread over the team.
+/// Pieces of work spread over the team: the backend's own phases and the core's passes
+/// in pieces.
 impl Pieces for Team<'_> {
     fn workers(&self) -> usize {
         self.n_members() + 1
     }
 
+    /// Calls `task` once with each of `items`, spread over the team (each thread its
+    /// own share of them first, then any left); returns when every call has returned.
+    /// A panic in a call is raised again here, after the others have returned.
     fn for_each<T: Send>(&self, items: &mut [T], task: impl Fn(&mut T) + Sync) {
-        Team::for_each(self, items, task);
+        let items = ItemsPtr(items.as_mut_ptr(), items.len());
+        let items = &items;
+        // SAFETY: `run` calls the closure with each index below the length once, so
+        // every `&mut` points to a different item, alive until `run` returns.
+        self.run(items.1, &|index| task(unsafe { &mut *items.0.add(index) }));
     }
 }
 
@@ -156,12 +132,6 @@ struct ItemsPtr<T>(*mut T, usize);
 
 // SAFETY: the items are `Send`, and each is reached from one thread only.
 unsafe impl<T: Send> Sync for ItemsPtr<T> {}
-
-enum Slot<T, U> {
-    Input(T),
-    Taken,
-    Output(U),
-}
 
 /// The phase the members work on: a task and its number of items.
 #[derive(Clone, Copy)]

@@ -29,10 +29,10 @@ use crate::sim::grid::{
     receive_band, refresh_band,
 };
 use crate::sim::neighbours::{
-    DISPLACEMENT_BLOCK, Displacements, PairList, Skin, larger, round_positions,
-    with_reorder_scratch,
+    DISPLACEMENT_BLOCK, Displacements, PairList, Skin, with_reorder_scratch,
 };
 use crate::sim::observe::observe;
+use crate::sim::pieces::{InTurn, Pieces};
 use crate::sim::prefetch::prefetch;
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::{ContactSchedule, DiskSet};
@@ -45,11 +45,11 @@ use crate::sim::{
 const MIN_CHUNK: usize = 4096;
 
 /// Scenes from this many disks on measure the largest displacement since the lists'
-/// build in the move's pieces, in parallel: on one thread it took 0.14–0.16 ns per
-/// disk-step at 10⁶ disks and packing 0.3, in pieces 0.06 (`docs/performance.md`). At
-/// 2·10⁴ disks, runs with the pieces went 0.971–0.978 times as fast as runs without
-/// (there the part takes a few µs a step on one thread; another phase of the team
-/// costing as much is the likely reason, not measured alone).
+/// build in pieces over the team: on one thread it took 0.14–0.16 ns per disk-step at
+/// 10⁶ disks and packing 0.3, in pieces 0.06 (`docs/performance.md`). At 2·10⁴ disks,
+/// runs with the pieces went 0.971–0.978 times as fast as runs without (there the part
+/// takes a few µs a step on one thread; another phase of the team costing as much is
+/// the likely reason, not measured alone).
 const PARALLEL_LARGEST_DISKS: usize = 1 << 16;
 
 /// A pool of exactly `threads` threads for one run (never the global pool).
@@ -313,16 +313,11 @@ impl ThreadedStepper {
         let n = particles.len();
         self.touched.resize(n, false);
         let largest_sq = if n >= PARALLEL_LARGEST_DISKS {
-            let chunk = self.chunk(n);
             self.skin
-                .largest_displacement_sq_with(particles, &self.domain, |farthest| {
-                    let pieces = (0..n)
-                        .step_by(chunk)
-                        .map(|start| start..(start + chunk).min(n));
-                    team.map(pieces, farthest).into_iter().fold(0.0, larger)
-                })
+                .largest_displacement_sq(particles, &self.domain, team)
         } else {
-            self.skin.largest_displacement_sq(particles, &self.domain)
+            self.skin
+                .largest_displacement_sq(particles, &self.domain, &InTurn)
         };
         let (skin, domain, now) = (&self.skin, &self.domain, &*particles);
         if !skin.is_exceeded(largest_sq) {
@@ -377,16 +372,7 @@ impl ThreadedStepper {
         team.for_each(&mut lists, |(list, band)| {
             list.rebuild(grid, (*band).clone(), particles_now, domain, skin)
         });
-        self.skin.record_with(particles, |x, y, x_built, y_built| {
-            let pieces = x.chunks(MIN_CHUNK).zip(y.chunks(MIN_CHUNK));
-            let built = x_built
-                .chunks_mut(MIN_CHUNK)
-                .zip(y_built.chunks_mut(MIN_CHUNK));
-            let largest = team.map(pieces.zip(built), |((x, y), (x_built, y_built))| {
-                round_positions(x, y, x_built, y_built)
-            });
-            largest.into_iter().fold(0.0, f64::max)
-        });
+        self.skin.record(particles, team);
     }
 
     /// The grid build, band by band, and when the [`ReorderSchedule`] says so the disks

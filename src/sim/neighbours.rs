@@ -17,6 +17,7 @@ use std::ops::Range;
 
 use super::grid::{Contact, StripGrid};
 use super::particles::{Particles, ReorderScratch};
+use super::pieces::{Pieces, split_at_ranges};
 use super::scene::{Boundary, Domain};
 
 /// The skin, in largest radii, in dilute gases (area fraction 0.05 and below) and in
@@ -46,6 +47,9 @@ const MAX_PATCH_SKINS: f64 = 1.0;
 /// rounding of the recorded positions, [`Skin::rounding`]): the margin covers rounding
 /// in the displacement and distance arithmetic.
 const SAFE_SKIN_FRACTION: f64 = 0.999;
+
+/// Positions per piece of the record's rounding ([`Skin::record`]), at least.
+const MIN_ROUNDING_PIECE: usize = 4096;
 
 /// The skin of a scene's lists and the positions they were last built at.
 #[derive(Clone, Debug, Default)]
@@ -236,23 +240,14 @@ impl Skin {
     /// build, if one escaped (the lists are stale: [`Skin::is_exceeded`]), and 0 if none
     /// did; infinite before the first build. Reads what the last move marked
     /// ([`Skin::tracking`]), or, if the disks were not moved through it since, marks
-    /// now. Afterwards [`Skin::escapees`] may ask which disks escaped.
-    pub fn largest_displacement_sq(&mut self, particles: &Particles, domain: &Domain) -> f64 {
-        self.largest_displacement_sq_with(particles, domain, |farthest| {
-            farthest(0..particles.len())
-        })
-    }
-
-    /// [`Skin::largest_displacement_sq`], the escapees measured by `measure` with the
-    /// search it is given: over the disks of a range (starting at a block boundary), the
-    /// square of the farthest escapee's displacement, 0 if none. In one piece or in
-    /// pieces (a parallel backend's), the pieces' results taken together with [`larger`]:
-    /// the same result however the disks are cut.
-    pub fn largest_displacement_sq_with(
+    /// now. Afterwards [`Skin::escapees`] may ask which disks escaped. The escapees are
+    /// measured in `pieces`, their results taken together with [`larger`]: the same
+    /// result however the disks are cut.
+    pub fn largest_displacement_sq(
         &mut self,
         particles: &Particles,
         domain: &Domain,
-        measure: impl FnOnce(&(dyn Fn(Range<usize>) -> f64 + Sync)) -> f64,
+        pieces: &impl Pieces,
     ) -> f64 {
         if !self.is_built_for(particles) {
             return f64::INFINITY;
@@ -261,6 +256,8 @@ impl Skin {
             self.displacements()
                 .measure(&particles.x, &particles.y, domain);
         }
+        // Over the disks of a range (starting at a block boundary), the square of the
+        // farthest escapee's displacement, 0 if none.
         let farthest = |range: Range<usize>| {
             let mut largest = 0.0;
             self.for_each_escapee(range, |idx| {
@@ -270,7 +267,8 @@ impl Skin {
             });
             largest
         };
-        let largest = measure(&farthest);
+        let ranges = pieces.cut(particles.len(), DISPLACEMENT_BLOCK, DISPLACEMENT_BLOCK);
+        let largest = pieces.map(ranges, farthest).into_iter().fold(0.0, larger);
         if largest > 0.0 {
             // Measured from the rounded record: the true distance may be longer.
             let bound = largest.sqrt() + self.rounding;
@@ -328,27 +326,24 @@ impl Skin {
         MAX_PATCH_SKINS * self.width
     }
 
-    /// Records the disks' positions as those of a build.
-    pub fn record(&mut self, particles: &Particles) {
-        self.record_with(particles, round_positions);
-    }
-
-    /// [`Skin::record`], with the rounding done by `round` (as [`round_positions`]
-    /// does it, in one piece or in pieces: a parallel backend's).
-    pub fn record_with(
-        &mut self,
-        particles: &Particles,
-        round: impl FnOnce(&[f64], &[f64], &mut [f32], &mut [f32]) -> f64,
-    ) {
+    /// Records the disks' positions as those of a build, rounded in `pieces`.
+    pub fn record(&mut self, particles: &Particles, pieces: &impl Pieces) {
         let n = particles.len();
         self.x_built.resize(n, 0.0);
         self.y_built.resize(n, 0.0);
-        let largest = round(
-            &particles.x,
-            &particles.y,
-            &mut self.x_built,
-            &mut self.y_built,
-        );
+        let ranges = pieces.cut(n, MIN_ROUNDING_PIECE, 1);
+        let x_built = split_at_ranges(&mut self.x_built, &ranges);
+        let y_built = split_at_ranges(&mut self.y_built, &ranges);
+        let cut = ranges.into_iter().zip(x_built).zip(y_built);
+        let largest = pieces.map(cut, |((range, x_built), y_built)| {
+            round_positions(
+                &particles.x[range.clone()],
+                &particles.y[range],
+                x_built,
+                y_built,
+            )
+        });
+        let largest = largest.into_iter().fold(0.0, f64::max);
         // Rounding to f32 moves a coordinate by at most 2⁻²⁴ of its magnitude (or by a
         // subnormal step near 0), a position by √2 times that, within 2⁻²³.
         self.rounding = largest * 2.0_f64.powi(-23) + f64::from(f32::MIN_POSITIVE);
@@ -362,7 +357,7 @@ impl Skin {
 /// returns the largest magnitude of a coordinate, NaN coordinates left out (such a disk
 /// escapes by its NaN displacement): what bounds the rounding. The same result however
 /// the disks are cut into pieces, the largest of the pieces' being the whole's.
-pub fn round_positions(x: &[f64], y: &[f64], x_built: &mut [f32], y_built: &mut [f32]) -> f64 {
+fn round_positions(x: &[f64], y: &[f64], x_built: &mut [f32], y_built: &mut [f32]) -> f64 {
     for (values, record) in [(x, x_built), (y, y_built)] {
         for (value, rounded) in values.iter().zip(record) {
             *rounded = *value as f32;
@@ -579,7 +574,7 @@ fn lent_scratch(lists: &mut [PairList], n_disks: usize) -> Option<ReorderScratch
 mod tests {
     use crate::sim::grid::{Contact, StripGrid};
     use crate::sim::particles::Particles;
-    use crate::sim::pieces::InTurn;
+    use crate::sim::pieces::{Backwards, InTurn};
     use crate::sim::scene::Scene;
     use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution, wrap_periodic};
     use crate::sim::{Boundary, Broadphase, Physics, StepParams, Stepper};
@@ -644,7 +639,7 @@ mod tests {
     /// and through a periodic edge.
     #[test]
     fn a_rounded_record_misses_no_escapee_far_from_the_origin() {
-        use crate::sim::neighbours::{Skin, larger};
+        use crate::sim::neighbours::Skin;
         use crate::sim::particles::Disk;
         use crate::sim::scene::Domain;
         for boundary in [Boundary::Walls, Boundary::Periodic] {
@@ -670,7 +665,7 @@ mod tests {
             };
             let built = Particles::from_disks(&(0..n).map(disk).collect::<Vec<_>>());
             let mut skin = Skin::with_width(skin_width);
-            skin.record(&built);
+            skin.record(&built, &InTurn);
             let mut moved = built.clone();
             let mut true_largest: f64 = 0.0;
             let mut escaped = Vec::new();
@@ -688,12 +683,9 @@ mod tests {
                     escaped.push(i as u32);
                 }
             }
-            let largest_sq = skin.largest_displacement_sq(&moved, &domain);
+            let largest_sq = skin.largest_displacement_sq(&moved, &domain, &InTurn);
             // As a parallel backend measures it: in pieces, the largest in the last.
-            let in_pieces = skin.largest_displacement_sq_with(&moved, &domain, |farthest| {
-                let pieces = (0..n).step_by(128).map(|start| start..(start + 128).min(n));
-                pieces.map(farthest).fold(0.0, larger)
-            });
+            let in_pieces = skin.largest_displacement_sq(&moved, &domain, &Backwards(3));
             assert_eq!(
                 in_pieces.to_bits(),
                 largest_sq.to_bits(),

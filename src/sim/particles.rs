@@ -8,7 +8,7 @@
 
 use std::ops::{Index, Range};
 
-use super::pieces::{InTurn, Pieces};
+use super::pieces::{InTurn, Pieces, split_at_ranges};
 use super::prefetch::prefetch;
 
 /// Positions, velocities and properties of every disk, one `f64` array per quantity;
@@ -257,19 +257,17 @@ impl<'a> PerDiskSlice<'a> {
 /// Values per piece of a gather or labelling in pieces ([`in_pieces`]), at least.
 const MIN_GATHER_PIECE: usize = 4096;
 
-/// `pass(start, piece)` on pieces of `values` (`start` the index of a piece's first
-/// value): about four per worker of `pieces`, at least [`MIN_GATHER_PIECE`] values each.
+/// `pass(start, piece)` on the pieces of `values` that `pieces` cuts ([`Pieces::cut`]:
+/// at least [`MIN_GATHER_PIECE`] values each), `start` the index of a piece's first.
 fn in_pieces<T: Send>(
     pieces: &impl Pieces,
     values: &mut [T],
     pass: impl Fn(usize, &mut [T]) + Sync,
 ) {
-    let size = values
-        .len()
-        .div_ceil(4 * pieces.workers())
-        .max(MIN_GATHER_PIECE);
-    let mut cut: Vec<_> = values.chunks_mut(size).enumerate().collect();
-    pieces.for_each(&mut cut, |(index, piece)| pass(*index * size, piece));
+    let ranges = pieces.cut(values.len(), MIN_GATHER_PIECE, 1);
+    let starts = ranges.iter().map(|range| range.start);
+    let mut cut: Vec<_> = starts.zip(split_at_ranges(values, &ranges)).collect();
+    pieces.for_each(&mut cut, |(start, piece)| pass(*start, piece));
 }
 
 /// Fills `into` with the `values` at the indices `order` lists, in order (as many).
@@ -296,7 +294,7 @@ type Held<const M: usize> = ([f64; M], u32);
 /// place, and returns true; or, when more than one disk in [`MAX_FAR_SHARE`] of a piece
 /// was stored far from its new slot, returns false having written nothing.
 ///
-/// The slots are cut into `pieces.workers()` pieces, each written in one pass, the
+/// The slots are cut into pieces ([`Pieces::cut`]), each written in one pass, the
 /// pieces perhaps at once. The old values of a piece's slots within `reach` (or a
 /// little more, at most [`MAX_PERMUTE_REACH`]) of the one written are held in a ring,
 /// each saved before its slot is written, so a disk stored that near its new slot is
@@ -318,10 +316,8 @@ fn permute_in_place<const M: usize>(
     // The ring holds the slots from `i - reach` to `i + reach` while slot i is written.
     let reach = ring_len / 2 - 1;
     // Pieces at least a ring long: the values saved across their edges stay few.
-    let n_pieces = pieces.workers().min(n / ring_len).max(1);
-    let bounds: Vec<Range<usize>> = (0..n_pieces)
-        .map(|k| k * n / n_pieces..(k + 1) * n / n_pieces)
-        .collect();
+    let bounds = pieces.cut(n, ring_len, 1);
+    let n_pieces = bounds.len();
     let mut saved: Vec<Option<Vec<Held<M>>>> = vec![None; n_pieces];
     {
         let arrays = arrays.each_ref().map(|values| &**values);
@@ -334,22 +330,14 @@ fn permute_in_place<const M: usize>(
     let Some(saved) = saved.into_iter().collect::<Option<Vec<_>>>() else {
         return false;
     };
-    let mut rest = (arrays, ids, order);
-    let mut writes: Vec<_> = bounds
-        .iter()
-        .zip(saved)
-        .map(|(slots, saved)| {
-            let (arrays, ids, order) = &mut rest;
-            let values = arrays.each_mut().map(|values| {
-                let (piece, after) = std::mem::take(values).split_at_mut(slots.len());
-                *values = after;
-                piece
-            });
-            let (piece_ids, after) = std::mem::take(ids).split_at_mut(slots.len());
-            *ids = after;
-            let (piece_order, after) = order.split_at(slots.len());
-            *order = after;
-            (slots.start, values, piece_ids, piece_order, saved)
+    let mut columns = arrays.map(|values| split_at_ranges(values, &bounds).into_iter());
+    let ids = split_at_ranges(ids, &bounds);
+    let mut writes: Vec<_> = (bounds.iter().zip(ids).zip(saved))
+        .map(|((slots, ids), saved)| {
+            let values = columns
+                .each_mut()
+                .map(|pieces| pieces.next().expect("a piece"));
+            (slots.start, values, ids, &order[slots.clone()], saved)
         })
         .collect();
     pieces.for_each(&mut writes, |(first, arrays, ids, order, saved)| {
@@ -894,7 +882,8 @@ mod tests {
         near.swap(584, 600);
         // Far: slot 10 takes disk 900, slot 900 disk 10.
         near.swap(10, 900);
-        // Across the edge of two pieces (at 333 of three, 250 and 750 of four, 500 of two).
+        // Across the edges of pieces: at 336 and 756 (84 slots each, as cut for three
+        // workers), at 750 (125 each, two workers).
         near[325..345].rotate_right(7);
         near[740..760].rotate_left(12);
         let scattered: Vec<u32> = (0..n).map(|k| k * 7919 % n).collect();
@@ -902,7 +891,7 @@ mod tests {
         let values =
             |k: usize| -> Vec<f64> { (0..n).map(|i| f64::from(i) + k as f64 * 0.25).collect() };
         let first_ids: Vec<u32> = (0..n).map(|i| i * 3).collect();
-        for pieces in [1, 2, 3, 4, 5] {
+        for workers in [1, 2, 3] {
             let mut arrays: [Vec<f64>; 5] = std::array::from_fn(values);
             let mut ids = first_ids.clone();
             let expected: Vec<Vec<f64>> = arrays
@@ -912,17 +901,17 @@ mod tests {
             let expected_ids: Vec<u32> = near.iter().map(|&j| ids[j as usize]).collect();
             let [a, b, c, d, e] = &mut arrays;
             let arrays_now = [&mut a[..], b, c, d, e];
-            let cut = Backwards(pieces);
+            let cut = Backwards(workers);
             assert!(
                 permute_in_place(arrays_now, &mut ids, &near, reach, &cut),
-                "in place in {pieces} pieces"
+                "in place for {workers} workers"
             );
             assert_eq!(
                 arrays.to_vec(),
                 expected,
-                "values in place, {pieces} pieces"
+                "values in place, {workers} workers"
             );
-            assert_eq!(ids, expected_ids, "ids in place, {pieces} pieces");
+            assert_eq!(ids, expected_ids, "ids in place, {workers} workers");
             // Scattered: given way to gathering, nothing written.
             let [a, b, c, d, e] = &mut arrays;
             let arrays_now = [&mut a[..], b, c, d, e];
@@ -932,9 +921,9 @@ mod tests {
             assert_eq!(
                 arrays.to_vec(),
                 expected,
-                "values untouched, {pieces} pieces"
+                "values untouched, {workers} workers"
             );
-            assert_eq!(ids, expected_ids, "ids untouched, {pieces} pieces");
+            assert_eq!(ids, expected_ids, "ids untouched, {workers} workers");
         }
         // Every disk one slot on: each piece's last slot reads the next piece's first.
         let shifted: Vec<u32> = (0..n).map(|k| (k + 1) % n).collect();
@@ -946,7 +935,7 @@ mod tests {
             &mut ids,
             &shifted,
             reach,
-            &Backwards(4)
+            &Backwards(2)
         ));
         assert_eq!(
             arrays[0],

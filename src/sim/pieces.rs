@@ -1,6 +1,8 @@
 //! Work cut into pieces that a backend may run at once: how the core's passes take a
 //! parallel backend's threads without knowing them.
 
+use std::ops::Range;
+
 /// Runs a task on each of a set of items, perhaps several at once on other threads.
 pub trait Pieces {
     /// How many threads the items are spread over (1: one after another).
@@ -8,6 +10,66 @@ pub trait Pieces {
 
     /// Calls `task` once with each of `items`; returns when every call has returned.
     fn for_each<T: Send>(&self, items: &mut [T], task: impl Fn(&mut T) + Sync);
+
+    /// `task` of each item, in the items' order ([`Pieces::for_each`]).
+    fn map<T: Send, U: Send>(
+        &self,
+        items: impl IntoIterator<Item = T>,
+        task: impl Fn(T) -> U + Sync,
+    ) -> Vec<U> {
+        let mut slots: Vec<Slot<T, U>> = items.into_iter().map(Slot::Input).collect();
+        self.for_each(&mut slots, |slot| {
+            if let Slot::Input(item) = std::mem::replace(slot, Slot::Taken) {
+                *slot = Slot::Output(task(item));
+            }
+        });
+        slots
+            .into_iter()
+            .map(|slot| match slot {
+                Slot::Output(output) => output,
+                _ => unreachable!("every item was mapped"),
+            })
+            .collect()
+    }
+
+    /// Ranges that cut `0..n` into about four pieces per worker, each a whole number
+    /// of `align` items (but the last), at least `min` long; one piece on one worker.
+    fn cut(&self, n: usize, min: usize, align: usize) -> Vec<Range<usize>> {
+        let size = if self.workers() == 1 {
+            n
+        } else {
+            n.div_ceil(4 * self.workers()).max(min)
+        };
+        let size = size.next_multiple_of(align).max(align);
+        (0..n)
+            .step_by(size)
+            .map(|start| start..(start + size).min(n))
+            .collect()
+    }
+}
+
+/// `values` cut into one slice per range of `ranges` (consecutive from 0, as
+/// [`Pieces::cut`] gives them, covering `values`).
+pub fn split_at_ranges<'a, T>(
+    mut values: &'a mut [T],
+    ranges: &[Range<usize>],
+) -> Vec<&'a mut [T]> {
+    debug_assert_eq!(ranges.last().map_or(0, |last| last.end), values.len());
+    ranges
+        .iter()
+        .map(|range| {
+            let (piece, after) = std::mem::take(&mut values).split_at_mut(range.len());
+            values = after;
+            piece
+        })
+        .collect()
+}
+
+/// An item of [`Pieces::map`]: before, during and after its task.
+enum Slot<T, U> {
+    Input(T),
+    Taken,
+    Output(U),
 }
 
 /// Every piece on the calling thread, one after another: the serial stepper's, and each

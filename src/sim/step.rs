@@ -209,7 +209,9 @@ impl Stepper {
     /// queries of the grid instead of a rebuild.
     fn find_contacts_listed(&mut self, particles: &mut Particles) {
         let domain = &self.domain.clone();
-        let largest_sq = self.skin.largest_displacement_sq(particles, domain);
+        let largest_sq = self
+            .skin
+            .largest_displacement_sq(particles, domain, &InTurn);
         self.escapees.clear();
         if self.skin.is_exceeded(largest_sq) {
             if self.skin.may_reach(largest_sq) {
@@ -253,7 +255,7 @@ impl Stepper {
         let strips = self.grid.owned();
         self.neighbours
             .rebuild(&self.grid, strips, particles, &self.domain, &self.skin);
-        self.skin.record(particles);
+        self.skin.record(particles, &InTurn);
     }
 
     /// Resolves the found pairs ([`resolve_contacts`]).
