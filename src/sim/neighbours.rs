@@ -39,6 +39,17 @@ const MIN_SKIN_RADII: f64 = 0.25;
 /// pairs found by queries), and are rebuilt after.
 const MAX_ESCAPEE_SHARE: usize = 64;
 
+/// In scenes of [`LARGE_SCENE_DISKS`] disks or more, lists serve on while at most one
+/// disk in this many escaped. A query there reads the grid and the disks far beyond the
+/// caches (at 10⁷ disks an escapee's queries cost some three times what they cost at
+/// 10⁵ per disk, the rebuild's scan the same), so rebuilding sooner pays: at 2·10⁶ and
+/// 10⁷ disks the serial step ran 1.02–1.05 times as fast; at 10⁶ and packing 0.3 it
+/// did not (0.98–1.00), at 10⁵ it ran slower (0.975) (`docs/performance.md`).
+const MAX_ESCAPEE_SHARE_LARGE: usize = 256;
+
+/// Scenes from this many disks on rebuild their lists by [`MAX_ESCAPEE_SHARE_LARGE`].
+const LARGE_SCENE_DISKS: usize = 1 << 20;
+
 /// Lists serve on while no disk moved further than this many skins (with queries for
 /// the escapees); a query's reach, and cost, grows with the distance.
 const MAX_PATCH_SKINS: f64 = 1.0;
@@ -310,7 +321,12 @@ impl Skin {
         n_particles: usize,
         largest_displacement_sq: f64,
     ) -> bool {
-        n_escapees * MAX_ESCAPEE_SHARE <= n_particles && self.may_reach(largest_displacement_sq)
+        let share = if n_particles < LARGE_SCENE_DISKS {
+            MAX_ESCAPEE_SHARE
+        } else {
+            MAX_ESCAPEE_SHARE_LARGE
+        };
+        n_escapees * share <= n_particles && self.may_reach(largest_displacement_sq)
     }
 
     /// True when queries may serve disks that moved √`largest_displacement_sq`: at most
@@ -588,6 +604,21 @@ mod tests {
             seed,
             ..GasSpec::unit(3000, packing)
         }
+    }
+
+    /// Lists serve on while one disk in 64 escaped, in a scene of 2²⁰ disks or more one
+    /// in 256, and never once a disk moved further than the queries reach.
+    #[test]
+    fn large_scenes_rebuild_their_lists_after_fewer_escapees() {
+        let skin = crate::sim::neighbours::Skin::with_width(2.0);
+        let within = skin.patch_reach() * skin.patch_reach();
+        let small = (1 << 20) - 1;
+        assert!(skin.may_patch(small / 64, small, within));
+        assert!(!skin.may_patch(small / 64 + 1, small, within));
+        let large = 1 << 20;
+        assert!(skin.may_patch(large / 256, large, within));
+        assert!(!skin.may_patch(large / 256 + 1, large, within));
+        assert!(!skin.may_patch(1, large, within * 1.01));
     }
 
     /// The marks of a block are the disks that moved at least the escape distance, or
