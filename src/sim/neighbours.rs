@@ -41,10 +41,11 @@ const MAX_ESCAPEE_SHARE: usize = 64;
 
 /// In scenes of [`LARGE_SCENE_DISKS`] disks or more, lists serve on while at most one
 /// disk in this many escaped. A query there reads the grid and the disks far beyond the
-/// caches (at 10⁷ disks an escapee's queries cost some three times what they cost at
-/// 10⁵ per disk, the rebuild's scan the same), so rebuilding sooner pays: at 2·10⁶ and
-/// 10⁷ disks the serial step ran 1.02–1.05 times as fast; at 10⁶ and packing 0.3 it
-/// did not (0.98–1.00), at 10⁵ it ran slower (0.975) (`docs/performance.md`).
+/// caches (from 10⁵ to 10⁷ disks the queries' cost per disk-step grew 1.9 times at
+/// packing 0.3 and 3.3 times at 0.05, the rebuild's scan not at all), so rebuilding
+/// sooner pays: at 2·10⁶ and 10⁷ disks the serial step ran 1.01–1.05 times as fast; at
+/// 10⁶ and packing 0.3 it did not (0.98–1.00), at 10⁵ it ran slower (0.975)
+/// (`docs/performance.md`).
 const MAX_ESCAPEE_SHARE_LARGE: usize = 256;
 
 /// Scenes from this many disks on rebuild their lists by [`MAX_ESCAPEE_SHARE_LARGE`].
