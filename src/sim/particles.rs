@@ -291,8 +291,9 @@ const MAX_PERMUTE_REACH: usize = (1 << 15) - 1;
 type Held<const M: usize> = ([f64; M], u32);
 
 /// Puts into slot i of `arrays` and `ids` what was at `order[i]` (a permutation), in
-/// place, and returns true; or, when more than one disk in [`MAX_FAR_SHARE`] of a piece
-/// was stored far from its new slot, returns false having written nothing.
+/// place, and returns true; or, when a piece would save more than one disk in
+/// [`MAX_FAR_SHARE`] of its slots from far off (a scene's first re-storing, from
+/// placement order), returns false having written nothing.
 ///
 /// The slots are cut into pieces ([`Pieces::cut`]), each written in one pass, the
 /// pieces perhaps at once. The old values of a piece's slots within `reach` (or a
@@ -357,8 +358,8 @@ fn is_out_of_reach(i: usize, j: usize, len: usize, reach: usize) -> bool {
 
 /// The old values (and ids) that the piece of slots `slots` reads from outside its ring
 /// and its own slots not yet written ([`is_out_of_reach`]), in the order it reads them;
-/// `None` when more than one in [`MAX_FAR_SHARE`] of its slots would read a disk stored
-/// more than `reach` slots from it.
+/// `None` when more than one in [`MAX_FAR_SHARE`] of its slots would read so a disk
+/// stored more than `reach` slots from it.
 fn save_out_of_reach<const M: usize>(
     arrays: &[&[f64]; M],
     ids: &[u32],
