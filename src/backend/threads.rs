@@ -32,7 +32,7 @@ use crate::sim::neighbours::{
     DISPLACEMENT_BLOCK, Displacements, PairList, Skin, with_reorder_scratch,
 };
 use crate::sim::observe::observe;
-use crate::sim::pieces::{InTurn, Pieces};
+use crate::sim::pieces::{InTurn, MIN_STREAMING_PIECE, Pieces};
 use crate::sim::prefetch::prefetch;
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::{ContactSchedule, DiskSet};
@@ -40,9 +40,6 @@ use crate::sim::step::{ReorderSchedule, advance_disks};
 use crate::sim::{
     Broadphase, DiskSlices, Domain, Particles, PerDisk, Physics, StepCounters, StepParams,
 };
-
-/// Disks per parallel chunk of the per-disk stage: large enough to amortise scheduling.
-const MIN_CHUNK: usize = 4096;
 
 /// Scenes from this many disks on measure the largest displacement since the lists'
 /// build in pieces over the team: on one thread it took 0.14–0.16 ns per disk-step at
@@ -210,7 +207,8 @@ impl ThreadedStepper {
 
     fn advance(&mut self, particles: &mut Particles, team: &Team<'_>) {
         let (domain, physics, dt) = (&self.domain, &self.physics, self.params.dt);
-        let chunk = self.chunk(particles.len());
+        // Whole blocks of the lists' displacement record per chunk.
+        let chunk = team.piece_len(particles.len(), MIN_STREAMING_PIECE, DISPLACEMENT_BLOCK);
         let n_chunks = particles.len().div_ceil(chunk);
         let displacements: Vec<Option<Displacements>> = match self.skin.tracking(particles.len()) {
             Some(record) => record.into_chunks(chunk).map(Some).collect(),
@@ -242,15 +240,6 @@ impl ThreadedStepper {
         });
         // Counts and maxima only: the same totals in any order.
         walls.iter().for_each(|walls| self.counters.merge(walls));
-    }
-
-    /// Disks per parallel chunk of the per-disk stages: whole blocks of the lists'
-    /// displacement record, at least [`MIN_CHUNK`], about four chunks per thread.
-    fn chunk(&self, n_particles: usize) -> usize {
-        n_particles
-            .div_ceil(4 * self.n_bands)
-            .max(MIN_CHUNK)
-            .next_multiple_of(DISPLACEMENT_BLOCK)
     }
 
     fn find_contacts(&mut self, particles: &mut Particles, team: &Team<'_>) {

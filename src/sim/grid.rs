@@ -308,8 +308,8 @@ impl StripGrid {
         pieces: &impl Pieces,
     ) {
         assert_eq!(scratch.order.len(), self.len(), "an order of every disk");
-        // Whole strips per piece, about as many entries in each.
-        let per_piece = self.len().div_ceil(pieces.workers()).max(1);
+        // Whole strips per piece, each at least as many entries as a piece of the cut.
+        let per_piece = pieces.piece_len(self.len(), 1, 1);
         let owned = &mut self.strips[..self.n_owned];
         // A disk that changed strips since it was stored moved by about a strip's length.
         let reach = owned.iter().map(Vec::len).max().unwrap_or(0) * 9 / 8;

@@ -17,7 +17,7 @@ use std::ops::Range;
 
 use super::grid::{Contact, StripGrid};
 use super::particles::{Particles, ReorderScratch};
-use super::pieces::{Pieces, split_at_ranges};
+use super::pieces::{MIN_STREAMING_PIECE, Pieces, split_at_ranges};
 use super::scene::{Boundary, Domain};
 
 /// The skin, in largest radii, in dilute gases (area fraction 0.05 and below) and in
@@ -59,9 +59,6 @@ const MAX_PATCH_SKINS: f64 = 1.0;
 /// rounding of the recorded positions, [`Skin::rounding`]): the margin covers rounding
 /// in the displacement and distance arithmetic.
 const SAFE_SKIN_FRACTION: f64 = 0.999;
-
-/// Positions per piece of the record's rounding ([`Skin::record`]), at least.
-const MIN_ROUNDING_PIECE: usize = 4096;
 
 /// The skin of a scene's lists and the positions they were last built at.
 #[derive(Clone, Debug, Default)]
@@ -348,7 +345,7 @@ impl Skin {
         let n = particles.len();
         self.x_built.resize(n, 0.0);
         self.y_built.resize(n, 0.0);
-        let ranges = pieces.cut(n, MIN_ROUNDING_PIECE, 1);
+        let ranges = pieces.cut(n, MIN_STREAMING_PIECE, 1);
         let x_built = split_at_ranges(&mut self.x_built, &ranges);
         let y_built = split_at_ranges(&mut self.y_built, &ranges);
         let cut = ranges.into_iter().zip(x_built).zip(y_built);

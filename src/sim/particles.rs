@@ -8,7 +8,7 @@
 
 use std::ops::{Index, Range};
 
-use super::pieces::{InTurn, Pieces, split_at_ranges};
+use super::pieces::{InTurn, MIN_STREAMING_PIECE, Pieces, split_at_ranges};
 use super::prefetch::prefetch;
 
 /// Positions, velocities and properties of every disk, one `f64` array per quantity;
@@ -254,17 +254,14 @@ impl<'a> PerDiskSlice<'a> {
     }
 }
 
-/// Values per piece of a gather or labelling in pieces ([`in_pieces`]), at least.
-const MIN_GATHER_PIECE: usize = 4096;
-
 /// `pass(start, piece)` on the pieces of `values` that `pieces` cuts ([`Pieces::cut`]:
-/// at least [`MIN_GATHER_PIECE`] values each), `start` the index of a piece's first.
+/// at least [`MIN_STREAMING_PIECE`] values each), `start` the index of a piece's first.
 fn in_pieces<T: Send>(
     pieces: &impl Pieces,
     values: &mut [T],
     pass: impl Fn(usize, &mut [T]) + Sync,
 ) {
-    let ranges = pieces.cut(values.len(), MIN_GATHER_PIECE, 1);
+    let ranges = pieces.cut(values.len(), MIN_STREAMING_PIECE, 1);
     let starts = ranges.iter().map(|range| range.start);
     let mut cut: Vec<_> = starts.zip(split_at_ranges(values, &ranges)).collect();
     pieces.for_each(&mut cut, |(start, piece)| pass(*start, piece));
@@ -289,6 +286,11 @@ const MAX_PERMUTE_REACH: usize = (1 << 15) - 1;
 
 /// One disk's values in the `M` arrays of a re-storing in place, and its id.
 type Held<const M: usize> = ([f64; M], u32);
+
+/// The values and id of the disk stored at slot `j`.
+fn held<const M: usize>(arrays: &[impl AsRef<[f64]>; M], ids: &[u32], j: usize) -> Held<M> {
+    (std::array::from_fn(|k| arrays[k].as_ref()[j]), ids[j])
+}
 
 /// Puts into slot i of `arrays` and `ids` what was at `order[i]` (a permutation), in
 /// place, and returns true; or, when a piece would save more than one disk in
@@ -379,7 +381,7 @@ fn save_out_of_reach<const M: usize>(
                     return None;
                 }
             }
-            saved.push((std::array::from_fn(|k| arrays[k][j]), ids[j]));
+            saved.push(held(arrays, ids, j));
         }
     }
     Some(saved)
@@ -399,16 +401,13 @@ fn permute_piece<const M: usize>(
 ) {
     let n = order.len();
     let mask = ring_len - 1;
-    let read = |arrays: &[&mut [f64]; M], ids: &[u32], j: usize| {
-        (std::array::from_fn(|k| arrays[k][j]), ids[j])
-    };
     let mut ring = vec![([0.0; M], 0_u32); ring_len];
-    for (j, held) in ring.iter_mut().enumerate().take(reach.min(n)) {
-        *held = read(arrays, ids, j);
+    for (j, slot) in ring.iter_mut().enumerate().take(reach.min(n)) {
+        *slot = held(arrays, ids, j);
     }
     for (i, &j) in order.iter().enumerate() {
         if i + reach < n {
-            ring[(i + reach) & mask] = read(arrays, ids, i + reach);
+            ring[(i + reach) & mask] = held(arrays, ids, i + reach);
         }
         let j = (j as usize).wrapping_sub(first);
         let (values, id) = if is_out_of_reach(i, j, n, reach) {
@@ -418,7 +417,7 @@ fn permute_piece<const M: usize>(
         } else if j <= i + reach {
             ring[j & mask]
         } else {
-            read(arrays, ids, j)
+            held(arrays, ids, j)
         };
         for (array, value) in arrays.iter_mut().zip(values) {
             array[i] = value;

@@ -3,6 +3,10 @@
 
 use std::ops::Range;
 
+/// Items per piece, at least, of a pass that streams through arrays (moving the disks,
+/// rounding their positions, gathering them): enough to outweigh handing a piece out.
+pub const MIN_STREAMING_PIECE: usize = 4096;
+
 /// Runs a task on each of a set of items, perhaps several at once on other threads.
 pub trait Pieces {
     /// How many threads the items are spread over (1: one after another).
@@ -32,18 +36,23 @@ pub trait Pieces {
             .collect()
     }
 
-    /// Ranges that cut `0..n` into about four pieces per worker, each a whole number
-    /// of `align` items (but the last), at least `min` long; one piece on one worker.
-    fn cut(&self, n: usize, min: usize, align: usize) -> Vec<Range<usize>> {
-        let size = if self.workers() == 1 {
+    /// The length of the pieces [`Pieces::cut`] makes of `n` items: about four pieces per
+    /// worker, a whole number of `align` items, at least `min`; all `n` on one worker.
+    fn piece_len(&self, n: usize, min: usize, align: usize) -> usize {
+        let len = if self.workers() == 1 {
             n
         } else {
             n.div_ceil(4 * self.workers()).max(min)
         };
-        let size = size.next_multiple_of(align).max(align);
+        len.next_multiple_of(align).max(align)
+    }
+
+    /// Ranges that cut `0..n` into pieces of [`Pieces::piece_len`] (the last shorter).
+    fn cut(&self, n: usize, min: usize, align: usize) -> Vec<Range<usize>> {
+        let len = self.piece_len(n, min, align);
         (0..n)
-            .step_by(size)
-            .map(|start| start..(start + size).min(n))
+            .step_by(len)
+            .map(|start| start..(start + len).min(n))
             .collect()
     }
 }
@@ -84,6 +93,14 @@ impl Pieces for InTurn {
 
     fn for_each<T: Send>(&self, items: &mut [T], task: impl Fn(&mut T) + Sync) {
         items.iter_mut().for_each(task);
+    }
+
+    fn map<T: Send, U: Send>(
+        &self,
+        items: impl IntoIterator<Item = T>,
+        task: impl Fn(T) -> U + Sync,
+    ) -> Vec<U> {
+        items.into_iter().map(task).collect()
     }
 }
 
