@@ -43,6 +43,21 @@ impl Default for PerDisk {
 }
 
 impl PerDisk {
+    /// Disks that can be appended without moving the values (any number when shared).
+    fn room(&self) -> usize {
+        match self {
+            PerDisk::Shared { .. } => usize::MAX,
+            PerDisk::Each(values) => values.capacity() - values.len(),
+        }
+    }
+
+    /// Makes room for `additional` more values than held, exactly (nothing when shared).
+    fn reserve_exact(&mut self, additional: usize) {
+        if let PerDisk::Each(values) = self {
+            values.reserve_exact(additional);
+        }
+    }
+
     /// The values of `values.len()` disks, held once when all are the same (bit for bit).
     pub fn from_values(values: Vec<f64>) -> PerDisk {
         match values.first() {
@@ -496,6 +511,37 @@ impl Particles {
         }
     }
 
+    /// Disks that can be appended without moving any array.
+    pub fn room(&self) -> usize {
+        let Particles {
+            id,
+            x,
+            y,
+            vx,
+            vy,
+            radius,
+            mass,
+        } = self;
+        let per_disk = [x, y, vx, vy].map(|values| values.capacity() - values.len());
+        (per_disk.into_iter())
+            .chain([id.capacity() - id.len(), radius.room(), mass.room()])
+            .min()
+            .unwrap_or(0)
+    }
+
+    /// Makes room for `additional` more disks than held, exactly: an append past the
+    /// room moves every array to one twice as long.
+    pub fn reserve_exact(&mut self, additional: usize) {
+        self.id.reserve_exact(additional);
+        let (motion, properties) = self.arrays_mut();
+        for values in motion {
+            values.reserve_exact(additional);
+        }
+        for values in properties {
+            values.reserve_exact(additional);
+        }
+    }
+
     /// Appends a disk with the next id.
     pub fn push(&mut self, disk: Disk) {
         self.id.push(self.len() as u32);
@@ -837,6 +883,36 @@ mod tests {
         assert_eq!(particles.radius.as_slice(), Some(&[0.75, 0.5, 0.5][..]));
         particles.truncate(1);
         assert_eq!(particles.disk(0), disk(3.0, 0.75));
+    }
+
+    /// Room made for k disks holds k appended disks where they are, in every array a
+    /// disk has (unequal radii too); a shared property has room for any number.
+    #[test]
+    fn disks_appended_within_the_room_move_no_array() {
+        let mut particles = Particles::from_disks(&[disk(1.0, 0.5), disk(2.0, 0.75)]);
+        particles.reserve_exact(5);
+        assert!(particles.room() >= 5);
+        let addresses = |p: &Particles| {
+            let radius = p.radius.as_slice().expect("unequal radii").as_ptr();
+            [
+                p.x.as_ptr(),
+                p.y.as_ptr(),
+                p.vx.as_ptr(),
+                p.vy.as_ptr(),
+                radius,
+            ]
+        };
+        let (before, id_before) = (addresses(&particles), particles.id.as_ptr());
+        let mut packed = Vec::new();
+        for idx in [0, 1, 0, 1, 0] {
+            particles.pack(idx, &mut packed);
+        }
+        particles.unpack_append(&packed);
+        assert_eq!(particles.len(), 7);
+        assert_eq!(addresses(&particles), before);
+        assert_eq!(particles.id.as_ptr(), id_before);
+        assert_eq!(particles.mass.shared(), Some(2.0));
+        assert_eq!(particles.mass.room(), usize::MAX);
     }
 
     /// How a property is held does not change what it is: values, equality, slices.
