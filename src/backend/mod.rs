@@ -226,7 +226,7 @@ pub fn summarize(
             final_observables.kinetic_energy,
         ],
     );
-    let elastic = physics.restitution == 1.0 && physics.wall_restitution == 1.0;
+    let elastic = physics.is_elastic();
     let is_event = prepared.method == Method::Event;
     let missed = if is_event {
         Some(0)
@@ -298,7 +298,7 @@ pub fn summarize(
         collapse_time: accuracy.collapse.map(|collapse| collapse.time),
         time_reached: Some(duration),
         tc: is_event.then_some(prepared.event.tc),
-        temperature_curve: accuracy.temperature_curve.clone().filter(|_| !elastic),
+        temperature_curve: accuracy.temperature_curve.clone(),
         rms_step_over_radius: {
             let step = prepared.initial.rms_speed * prepared.params.dt;
             (step > 0.0).then(|| step / prepared.initial.min_radius)

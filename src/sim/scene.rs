@@ -153,6 +153,11 @@ impl Physics {
     pub fn elastic() -> Physics {
         Physics::with_restitution(1.0)
     }
+
+    /// Pairs and walls give back all their normal speed: the kinetic energy is conserved.
+    pub fn is_elastic(&self) -> bool {
+        self.restitution == 1.0 && self.wall_restitution == 1.0
+    }
 }
 
 /// A complete initial condition: box, physics and disks.
