@@ -27,7 +27,8 @@ reps = int(sys.argv[3]) if len(sys.argv) > 3 else 3
 env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
            OMPI_MCA_rmaps_base_oversubscribe="1")
 scene = "experiments/scenes/seed-1000.toml"
-cases = [(100000, 0.05, 100), (100000, 0.3, 100), (1000000, 0.05, 50), (1000000, 0.3, 50)]
+# 100 steps, as the shipped scaling study (`experiments/large.toml`) runs these scenes.
+cases = [(100000, 0.05, 100), (100000, 0.3, 100), (1000000, 0.05, 100), (1000000, 0.3, 100)]
 backends = [("serial", []), ("rayon2", ["--backend", "rayon", "--threads", "2"]),
             ("mpi2", ["--backend", "mpi", "--ranks", "2"])]
 ours, yardstick, hashes = {}, {}, {}
