@@ -94,7 +94,8 @@ pub struct RunSummary {
     #[serde(default)]
     pub collision_rate: Option<f64>,
     /// Mean temperature T̄ = kinetic energy per disk (k_B = 1), averaged over the run
-    /// (over the sampled curve on the serial backend, else the mean of start and end).
+    /// (over the sampled curve where there is one, in scenes with e < 1 on the serial
+    /// backend, else the mean of start and end).
     #[serde(default)]
     pub temperature: Option<f64>,
     /// 2D pressure from the collision virial: P = (n·T̄ + Σ d·J / (2·steps·dt)) / A.
