@@ -513,20 +513,14 @@ impl Particles {
 
     /// Disks that can be appended without moving any array.
     pub fn room(&self) -> usize {
-        let Particles {
-            id,
-            x,
-            y,
-            vx,
-            vy,
-            radius,
-            mass,
-        } = self;
-        let per_disk = [x, y, vx, vy].map(|values| values.capacity() - values.len());
-        (per_disk.into_iter())
-            .chain([id.capacity() - id.len(), radius.room(), mass.room()])
-            .min()
-            .unwrap_or(0)
+        let motion = [&self.x, &self.y, &self.vx, &self.vy];
+        let ids = self.id.capacity() - self.id.len();
+        (motion
+            .map(|values| values.capacity() - values.len())
+            .into_iter())
+        .chain([ids, self.radius.room(), self.mass.room()])
+        .min()
+        .unwrap_or(0)
     }
 
     /// Makes room for `additional` more disks than held, exactly: an append past the
