@@ -33,16 +33,12 @@ use crate::sim::grid::{
 };
 use crate::sim::neighbours::{PairList, Skin, larger, with_reorder_scratch};
 use crate::sim::observe::observe;
-use crate::sim::particles::PACKED_LEN;
+use crate::sim::particles::{PACKED_LEN, SPARE_SHARE};
 use crate::sim::pieces::InTurn;
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::{ContactSchedule, DiskSet};
 use crate::sim::step::{ReorderSchedule, advance_disks};
 use crate::sim::{Boundary, Particles, StepCounters};
-
-/// A rank's arrays keep room for this share of the disks they hold more: ghosts, other
-/// ranks' escapees and immigrants are appended to them ([`RankState::make_room`]).
-const SPARE_ROOM_SHARE: usize = 16;
 
 /// Runs `spec` on every rank of `comm` (all ranks call this together). Rank 0 returns
 /// the summary and the whole final state; the other ranks return `None`.
@@ -274,7 +270,7 @@ impl RankState {
             }
         }
         let n_own = packed.len() / PACKED_LEN;
-        let mut particles = Particles::with_capacity(n_own + n_own / SPARE_ROOM_SHARE);
+        let mut particles = Particles::with_capacity(n_own + n_own / SPARE_SHARE);
         particles.unpack_append(&packed);
         let mut grid = StripGrid::window(&scene.domain, layout, slab.clone());
         grid.fill(&particles, 0..particles.len());
@@ -607,7 +603,7 @@ impl RankState {
     }
 
     /// Makes room, when there is too little, for the disks packed in `incoming` and a
-    /// spare share ([`SPARE_ROOM_SHARE`]) of all the rank then holds. An append past the
+    /// spare share ([`SPARE_SHARE`]) of all the rank then holds. An append past the
     /// room would move every array to one twice as long in the middle of a step: at 10⁶
     /// disks on 2 ranks, the first reported escapees cost the top rank, built without
     /// ghosts and so without room, 5.5 ms (two steps' time) while the other waited.
@@ -617,7 +613,7 @@ impl RankState {
             .sum();
         let particles = &mut self.particles;
         if particles.room() < incoming {
-            let spare = (particles.len() + incoming) / SPARE_ROOM_SHARE;
+            let spare = (particles.len() + incoming) / SPARE_SHARE;
             particles.reserve_exact(incoming + spare);
         }
     }

@@ -457,6 +457,10 @@ pub struct ReorderScratch<'a> {
     pub spare: &'a mut [f64],
 }
 
+/// Arrays and scratch by storage index that grow as a worker's disks come and go keep
+/// this share of their length spare: an MPI rank's count moves by a few disks a step.
+pub const SPARE_SHARE: usize = 16;
+
 /// Values per disk in a packed buffer ([`Particles::pack`]).
 pub const PACKED_LEN: usize = 7;
 
@@ -514,13 +518,13 @@ impl Particles {
     /// Disks that can be appended without moving any array.
     pub fn room(&self) -> usize {
         let motion = [&self.x, &self.y, &self.vx, &self.vy];
-        let ids = self.id.capacity() - self.id.len();
-        (motion
-            .map(|values| values.capacity() - values.len())
-            .into_iter())
-        .chain([ids, self.radius.room(), self.mass.room()])
-        .min()
-        .unwrap_or(0)
+        let motion = motion.map(|values| values.capacity() - values.len());
+        let others = [
+            self.id.capacity() - self.id.len(),
+            self.radius.room(),
+            self.mass.room(),
+        ];
+        motion.into_iter().chain(others).min().unwrap_or(0)
     }
 
     /// Makes room for `additional` more disks than held, exactly: an append past the

@@ -14,6 +14,7 @@
 //! own and may go anywhere, so it goes in the order found, next to the disks it reads.
 
 use super::grid::{Contact, order_canonically};
+use super::particles::SPARE_SHARE;
 
 /// Scratch memory for splitting contacts by chain, per storage index: the union–find
 /// parent, and whether the disk's chain holds a pinned disk (valid for disks in this
@@ -209,9 +210,8 @@ impl ContactSchedule {
             // chained disk's entry on it is first written. A resize wrote every entry,
             // 5 bytes a disk for each worker (a rayon band's covers all the disks), in
             // the first step: rayon on 2 threads at 10⁷ disks peaked at 875 MB instead
-            // of 835 (20 steps). A sixteenth more, so that a rank's count growing by a
-            // few disks does not allocate anew.
-            let len = n_particles + n_particles / 16;
+            // of 835 (20 steps). With a spare share, as a rank's count grows.
+            let len = n_particles + n_particles / SPARE_SHARE;
             self.parent = vec![0; len];
             self.pinned = vec![false; len];
         }
