@@ -209,8 +209,8 @@ impl ContactSchedule {
             // Fresh zeroed memory, never written as a whole: a page is mapped when a
             // chained disk's entry on it is first written. A resize wrote every entry,
             // 5 bytes a disk for each worker (a rayon band's covers all the disks), in
-            // the first step: rayon on 2 threads at 10⁷ disks peaked at 875 MB instead
-            // of 835 (20 steps). With a spare share, as a rank's count grows.
+            // the first step: rayon on 2 threads at 10⁷ disks peaked at 875,116 kB instead
+            // of 834,792 (20 steps). With a spare share, as a rank's count grows.
             let len = n_particles + n_particles / SPARE_SHARE;
             self.parent = vec![0; len];
             self.pinned = vec![false; len];
