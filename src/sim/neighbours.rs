@@ -39,7 +39,7 @@ const MIN_SKIN_RADII: f64 = 0.25;
 /// pairs found by queries), and are rebuilt after.
 const MAX_ESCAPEE_SHARE: usize = 64;
 
-/// In scenes of [`LARGE_SCENE_DISKS`] disks or more, lists serve on while at most one
+/// In scenes of [`EARLY_REBUILD_DISKS`] disks or more, lists serve on while at most one
 /// disk in this many escaped. A query there reads the grid and the disks far beyond the
 /// caches (from 10⁵ to 10⁷ disks the queries' cost per disk-step grew 1.9 times at
 /// packing 0.3 and 3.3 times at 0.05, the rebuild's scan not at all), so rebuilding
@@ -48,8 +48,10 @@ const MAX_ESCAPEE_SHARE: usize = 64;
 /// (`docs/performance.md`).
 const MAX_ESCAPEE_SHARE_LARGE: usize = 256;
 
-/// Scenes from this many disks on rebuild their lists by [`MAX_ESCAPEE_SHARE_LARGE`].
-const LARGE_SCENE_DISKS: usize = 1 << 20;
+/// Scenes from this many disks on rebuild their lists by [`MAX_ESCAPEE_SHARE_LARGE`]:
+/// larger than the scenes the stepper re-stores more often (`sim::step`), since 10⁶ disks
+/// at packing 0.3 did not gain.
+const EARLY_REBUILD_DISKS: usize = 1 << 20;
 
 /// Lists serve on while no disk moved further than this many skins (with queries for
 /// the escapees); a query's reach, and cost, grows with the distance.
@@ -319,7 +321,7 @@ impl Skin {
         n_particles: usize,
         largest_displacement_sq: f64,
     ) -> bool {
-        let share = if n_particles < LARGE_SCENE_DISKS {
+        let share = if n_particles < EARLY_REBUILD_DISKS {
             MAX_ESCAPEE_SHARE
         } else {
             MAX_ESCAPEE_SHARE_LARGE
