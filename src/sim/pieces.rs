@@ -36,13 +36,24 @@ pub trait Pieces {
             .collect()
     }
 
-    /// The length of the pieces [`Pieces::cut`] makes of `n` items: about four pieces per
-    /// worker, a whole number of `align` items, at least `min`; all `n` on one worker.
+    /// The length of the pieces [`Pieces::cut`] makes of `n` items: four pieces per
+    /// worker, or fewer where pieces would be shorter than `min`, as many for every
+    /// worker while there are enough (each thread's share is the same number of pieces);
+    /// a whole number of `align` items; all `n` on one worker.
     fn piece_len(&self, n: usize, min: usize, align: usize) -> usize {
-        let len = if self.workers() == 1 {
+        let workers = self.workers();
+        let len = if workers == 1 {
             n
         } else {
-            n.div_ceil(4 * self.workers()).max(min)
+            let most = (n / min.max(1)).max(1);
+            let pieces = if most >= 4 * workers {
+                4 * workers
+            } else if most >= workers {
+                most - most % workers
+            } else {
+                most
+            };
+            n.div_ceil(pieces)
         };
         len.next_multiple_of(align).max(align)
     }
@@ -118,5 +129,31 @@ impl Pieces for Backwards {
 
     fn for_each<T: Send>(&self, items: &mut [T], task: impl Fn(&mut T) + Sync) {
         items.iter_mut().rev().for_each(task);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Where the minimum piece leaves fewer than four pieces per worker, the count is still
+    /// a multiple of the workers: each thread's share is as long (20,000 disks over two
+    /// threads made five pieces, shares of two and three, before).
+    #[test]
+    fn every_worker_gets_as_many_pieces() {
+        let two = Backwards(2);
+        for n in [8_192, 12_000, 20_000, 33_000, 40_000, 1_000_000] {
+            let pieces = two.cut(n, MIN_STREAMING_PIECE, 64);
+            assert_eq!(pieces.len() % 2, 0, "{n} items: {} pieces", pieces.len());
+            let (first, last) = (&pieces[0], &pieces[pieces.len() - 1]);
+            assert!(
+                first.len() >= MIN_STREAMING_PIECE && last.end == n,
+                "{n}: {pieces:?}"
+            );
+        }
+        assert_eq!(two.cut(20_000, MIN_STREAMING_PIECE, 64).len(), 4);
+        assert_eq!(two.cut(1_000_000, MIN_STREAMING_PIECE, 64).len(), 8);
+        // Too few items for a piece each: one piece.
+        assert_eq!(two.cut(5_000, MIN_STREAMING_PIECE, 64).len(), 1);
     }
 }
