@@ -1,6 +1,7 @@
 //! All integration tests, built into one test binary.
 
 mod accuracy;
+mod architecture;
 mod auto;
 mod backends;
 mod check;
