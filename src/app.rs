@@ -25,7 +25,7 @@ use crate::study::records::{self, Record, STATUS_OK};
 use crate::study::runner::{Calibration, RunOptions, Slowdown};
 use crate::study::{manifest, runner};
 use crate::system::output::{
-    check_output_file, check_output_folder, write_atomically, write_state_csv,
+    check_distinct, check_output_file, check_output_folder, write_atomically, write_state_csv,
 };
 use crate::view::render;
 use crate::view::window::ViewOptions;
@@ -44,7 +44,7 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Simulate(args) => simulate(&args),
         Command::Run(args) => run_study(&args),
         Command::Results(args) => {
-            print!("{}", results::show(&args.path)?);
+            crate::out!("{}", results::show(&args.path)?);
             Ok(())
         }
         Command::Report(args) => write_report(&args),
@@ -57,7 +57,7 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
                 calibration_s: seconds.wall,
                 calibration_cpu_s: seconds.cpu,
             };
-            println!("{}", serde_json::to_string(&calibration)?);
+            crate::outln!("{}", serde_json::to_string(&calibration)?);
             Ok(())
         }
     };
@@ -91,11 +91,7 @@ fn render_scene(args: &RenderArgs) -> anyhow::Result<()> {
             "nothing to draw; add --png FILE (the disks after the run) and/or --gif FILE (the run)"
         );
     }
-    for (flag, path) in [("--png", &args.png), ("--gif", &args.gif)] {
-        if let Some(path) = path {
-            check_output_file(path, flag)?;
-        }
-    }
+    check_outputs(&args.scene, &[("--png", &args.png), ("--gif", &args.gif)])?;
     let spec = scene_file::load(&args.scene, &args.overrides)?;
     check_fits(&args.scene, &spec, 1, &Machine::this())?;
     let prepared = spec
@@ -103,7 +99,7 @@ fn render_scene(args: &RenderArgs) -> anyhow::Result<()> {
         .with_context(|| format!("{}", args.scene.display()))?;
     if let Some(path) = &args.png {
         render::png_after_run(&prepared, path)?;
-        println!(
+        crate::outln!(
             "{} disks after {} steps drawn to {}",
             prepared.scene.particles.len(),
             prepared.steps,
@@ -112,7 +108,7 @@ fn render_scene(args: &RenderArgs) -> anyhow::Result<()> {
     }
     if let Some(path) = &args.gif {
         render::gif_of_run(&prepared, path, args.frames)?;
-        println!(
+        crate::outln!(
             "{} steps animated in {} frames to {}",
             prepared.steps,
             args.frames,
@@ -123,11 +119,10 @@ fn render_scene(args: &RenderArgs) -> anyhow::Result<()> {
 }
 
 fn view_scene(args: &ViewArgs) -> anyhow::Result<()> {
-    for (flag, path) in [("--stats", &args.stats), ("--screenshot", &args.screenshot)] {
-        if let Some(path) = path {
-            check_output_file(path, flag)?;
-        }
-    }
+    check_outputs(
+        &args.scene,
+        &[("--stats", &args.stats), ("--screenshot", &args.screenshot)],
+    )?;
     let spec = scene_file::load(&args.scene, &args.overrides)?;
     if spec.method.draw {
         bail!(
@@ -156,9 +151,13 @@ fn view_scene(args: &ViewArgs) -> anyhow::Result<()> {
         screenshot: args.screenshot.clone(),
     };
     let stats = view::window::run(prepared, &options)?;
-    println!(
+    crate::outln!(
         "{} frames at {:.1} frames/s; {} steps at {:.1} steps/s; state {}",
-        stats.frames, stats.frames_per_s, stats.steps, stats.steps_per_s, stats.state_hash
+        stats.frames,
+        stats.frames_per_s,
+        stats.steps,
+        stats.steps_per_s,
+        stats.state_hash
     );
     Ok(())
 }
@@ -206,7 +205,7 @@ fn write_history_report(args: &ReportArgs) -> anyhow::Result<()> {
     let path = out.join("report.md");
     let text = markdown::history(&entries, &args.path);
     write_atomically(&path, |file| file.write_all(text.as_bytes()))?;
-    println!(
+    crate::outln!(
         "history of {} checks drawn: {}",
         figures::history::checks(&entries).len(),
         path.display()
@@ -269,7 +268,7 @@ fn report_into(records: &[Record], source: &Path, out: &Path, flag: &str) -> any
     let path = out.join("report.md");
     let text = markdown::markdown(records, &setups, &source.display().to_string(), &pictures);
     write_atomically(&path, |file| file.write_all(text.as_bytes()))?;
-    println!(
+    crate::outln!(
         "report written to {}, its figures beside it",
         path.display()
     );
@@ -280,19 +279,21 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
     let (study, text) = manifest::load(&args.manifest)?;
     let reports = args.reports.join(&study.name);
     // Refused before the first run, not after the last.
+    check_output_folder(&args.out, "--out")?;
     if !args.no_report {
         check_output_folder(&reports, "--reports")?;
     }
     let options = RunOptions {
         out: args.out.clone(),
         resume: args.resume,
+        continue_with: runner::resume_command(&args.manifest, &args.out),
         quiet: args.quiet,
         programs: vec![runner::Program::this()?],
         calibrate: false,
         mpi_yields_when_idle: false,
     };
     let outcome = runner::run_study(&study, &text, &options)?;
-    println!(
+    crate::outln!(
         "{} runs measured, {} failed{} → {}",
         outcome.measured,
         outcome.failed,
@@ -306,14 +307,14 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
     // What the study was for: its table, and its report (failed runs are left out of both).
     let records = records::read(&outcome.results)?;
     if records.iter().any(|r| r.status == STATUS_OK) {
-        print!("\n{}", results::summary(&records)?);
+        crate::out!("\n{}", results::summary(&records)?);
         if args.no_report {
-            println!(
+            crate::outln!(
                 "\nno report written (--no-report); write it with `collide report {}`",
                 outcome.results.display()
             );
         } else {
-            println!();
+            crate::outln!();
             report_into(&records, &outcome.results, &reports, "--reports")?;
         }
     }
@@ -331,9 +332,7 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
 fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let machine = Machine::this();
     let backend = backend_spec(args, &machine)?;
-    if let Some(path) = &args.dump {
-        check_output_file(path, "--dump")?;
-    }
+    check_outputs(&args.scene, &[("--dump", &args.dump)])?;
     let mut spec = scene_file::load(&args.scene, &args.overrides)?;
     // Every rank of an MPI run builds all the disks.
     let copies = match backend {
@@ -379,14 +378,30 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         Finished::OtherRank => return Ok(()),
     };
     if args.json {
-        println!("{}", serde_json::to_string(&summary)?);
+        crate::outln!("{}", serde_json::to_string(&summary)?);
     } else {
-        println!("{summary}");
+        crate::outln!("{summary}");
         if let Some(path) = &args.dump {
-            println!("final state written to {}", path.display());
+            crate::outln!("final state written to {}", path.display());
         }
     }
     Ok(())
+}
+
+/// Checks, before any work, the output files a command was given (each with its flag):
+/// each can be written, and none is the scene file nor another output.
+fn check_outputs(
+    scene: &Path,
+    outputs: &[(&str, &Option<std::path::PathBuf>)],
+) -> anyhow::Result<()> {
+    let given: Vec<(&str, &Path)> = outputs
+        .iter()
+        .filter_map(|(flag, path)| path.as_deref().map(|path| (*flag, path)))
+        .collect();
+    for (flag, path) in &given {
+        check_output_file(path, flag)?;
+    }
+    check_distinct(&[("scene file", scene)], &given)
 }
 
 /// Refuses a run whose memory cannot fit the machine, and announces a long placement.
@@ -433,7 +448,7 @@ fn run_mpi(
     let launch = launcher::Launch {
         ranks: ranks.map_or_else(usable_cpus, NonZeroUsize::get),
         launcher: args.launcher.clone(),
-        timeout: std::time::Duration::from_secs_f64(args.mpi_timeout),
+        timeout: std::time::Duration::from_secs_f64(mpi_timeout(args)?),
     };
     // The ranks run this same command line; rank 0 answers in JSON.
     let mut forwarded: Vec<std::ffi::OsString> = std::env::args_os().skip(1).collect();
@@ -441,6 +456,27 @@ fn run_mpi(
         forwarded.push("--json".into());
     }
     Ok(Finished::Launched(launcher::launch(&launch, &forwarded)?))
+}
+
+/// The variable that sets `--mpi-timeout` when the flag is not given.
+#[cfg(feature = "mpi")]
+const MPI_TIMEOUT_ENV: &str = "COLLIDE_MPI_TIMEOUT";
+
+/// Seconds before a launched MPI run is stopped: `--mpi-timeout`, else
+/// [`MPI_TIMEOUT_ENV`], else an hour; a bad variable is named as such.
+#[cfg(feature = "mpi")]
+fn mpi_timeout(args: &SimulateArgs) -> anyhow::Result<f64> {
+    if let Some(seconds) = args.mpi_timeout {
+        return Ok(seconds);
+    }
+    match std::env::var(MPI_TIMEOUT_ENV) {
+        Ok(text) => crate::cli::parse_seconds(&text).map_err(|reason| {
+            anyhow::anyhow!(
+                "the environment variable {MPI_TIMEOUT_ENV}={text:?}: {reason}; fix or unset it"
+            )
+        }),
+        Err(_) => Ok(3600.0),
+    }
 }
 
 #[cfg(not(feature = "mpi"))]

@@ -144,7 +144,7 @@ pub struct CheckArgs {
     /// Relative change that counts as noise: a configuration regressed only when the
     /// whole confidence interval of its time ratio lies above 1 + this (the default is
     /// chosen from A/A and injected-slowdown checks: docs/ci-check.md, Measured).
-    #[arg(long, value_name = "FRACTION", default_value_t = 0.03, value_parser = parse_fraction)]
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.03, value_parser = parse_fraction, allow_negative_numbers = true)]
     pub noise: f64,
     /// Also build REV (any git revision; default: the commit that recorded the
     /// baseline) and run both builds interleaved: the paired ratios of this build to
@@ -159,7 +159,7 @@ pub struct CheckArgs {
     pub no_history: bool,
     /// Add this fraction of extra work to every step of this build's measured runs
     /// (testing only).
-    #[arg(long, value_name = "FRACTION", default_value_t = 0.0, value_parser = parse_fraction, hide = true)]
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.0, value_parser = parse_fraction, allow_negative_numbers = true, hide = true)]
     pub inject_slowdown: f64,
     /// Only into the runs of this backend (with --inject-slowdown; default: every backend).
     #[arg(
@@ -185,8 +185,8 @@ pub struct RenderArgs {
     /// Write an animated GIF of the run, from the start to the last step.
     #[arg(long, value_name = "FILE")]
     pub gif: Option<PathBuf>,
-    /// Frames of the GIF, spread evenly over the run.
-    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(2..=1000))]
+    /// Frames of the GIF, spread evenly over the run (2 to 1000).
+    #[arg(long, default_value_t = 60, value_parser = parse_gif_frames, allow_negative_numbers = true)]
     pub frames: u32,
     #[command(flatten)]
     pub overrides: Overrides,
@@ -197,10 +197,10 @@ pub struct ViewArgs {
     /// Scene file (TOML), e.g. experiments/scenes/seed-1000.toml.
     pub scene: PathBuf,
     /// Step with the rayon backend on this many threads (default: the serial backend).
-    #[arg(long, value_parser = parse_workers)]
+    #[arg(long, value_parser = parse_workers, allow_negative_numbers = true)]
     pub threads: Option<NonZeroUsize>,
     /// Exit after this many frames.
-    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, value_name = "K", value_parser = parse_positive, allow_negative_numbers = true)]
     pub frames: Option<u64>,
     /// At exit, write frame and step rates and where the time went (JSON) to FILE.
     #[arg(long, value_name = "FILE")]
@@ -212,10 +212,10 @@ pub struct ViewArgs {
     #[arg(long, value_name = "WxH", default_value = "800x800", value_parser = parse_size)]
     pub size: (usize, usize),
     /// Frames per second at most; 0 draws as fast as it can (to measure).
-    #[arg(long, value_name = "FPS", default_value_t = 60)]
+    #[arg(long, value_name = "FPS", default_value_t = 60, value_parser = parse_max_fps, allow_negative_numbers = true)]
     pub max_fps: u32,
     /// Steps between two frames at the start ([ and ] halve and double it).
-    #[arg(long, value_name = "STEPS", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, value_name = "STEPS", default_value_t = 1, value_parser = parse_positive, allow_negative_numbers = true)]
     pub steps_per_frame: u64,
     #[command(flatten)]
     pub overrides: Overrides,
@@ -237,7 +237,8 @@ pub struct RunArgs {
     /// Results root; the study writes into OUT/<study name>/.
     #[arg(long, value_name = "DIR", default_value = "results")]
     pub out: PathBuf,
-    /// Continue the newest results file of this manifest and build, running only what is missing.
+    /// Continue the newest results file of this build: reuse its runs of the same
+    /// configurations and scene contents, run only what is missing.
     #[arg(long)]
     pub resume: bool,
     /// No progress bar or notes (automatic when stdout is not a terminal).
@@ -273,10 +274,10 @@ pub struct SimulateArgs {
     #[arg(long, value_enum, default_value_t = BackendKind::Serial)]
     pub backend: BackendKind,
     /// Threads of the rayon pool (with --backend rayon; default: the logical cores).
-    #[arg(long, value_parser = parse_workers)]
+    #[arg(long, value_parser = parse_workers, allow_negative_numbers = true)]
     pub threads: Option<NonZeroUsize>,
     /// MPI ranks to launch (with --backend mpi; default under mpirun: its world size).
-    #[arg(long, value_parser = parse_workers)]
+    #[arg(long, value_parser = parse_workers, allow_negative_numbers = true)]
     pub ranks: Option<NonZeroUsize>,
     /// Allow more than 8 threads or ranks per usable CPU (refused otherwise: such a
     /// run measures the scheduler rather than the simulation).
@@ -286,11 +287,12 @@ pub struct SimulateArgs {
     /// (e.g. "mpirun --bind-to core", or "mpiexec" for MPICH).
     #[arg(long, env = "COLLIDE_MPI_LAUNCHER", default_value = "mpirun")]
     pub launcher: String,
-    /// Seconds before a launched MPI run is killed with all its ranks.
-    #[arg(long, env = "COLLIDE_MPI_TIMEOUT", default_value_t = 3600.0, value_parser = parse_seconds)]
-    pub mpi_timeout: f64,
+    /// Seconds before a launched MPI run is killed with all its ranks [default: the
+    /// environment's COLLIDE_MPI_TIMEOUT, else 3600]. Read only with --backend mpi.
+    #[arg(long, value_parser = parse_seconds)]
+    pub mpi_timeout: Option<f64>,
     /// Add this fraction of extra work to every step (testing `collide check` only).
-    #[arg(long, value_name = "FRACTION", default_value_t = 0.0, value_parser = parse_fraction, hide = true)]
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.0, value_parser = parse_fraction, allow_negative_numbers = true, hide = true)]
     pub inject_slowdown: f64,
 }
 
@@ -309,22 +311,53 @@ fn parse_size(text: &str) -> Result<(usize, usize), String> {
     })
 }
 
-fn parse_seconds(text: &str) -> Result<f64, String> {
+/// The longest timeout a flag or variable may set: a year, far inside what a
+/// `Duration` holds.
+const MAX_SECONDS: f64 = 365.0 * 86_400.0;
+
+/// A timeout in seconds: positive, at most [`MAX_SECONDS`].
+pub fn parse_seconds(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
-        Ok(seconds) if seconds > 0.0 && seconds.is_finite() => Ok(seconds),
+        Ok(seconds) if seconds > 0.0 && seconds <= MAX_SECONDS => Ok(seconds),
         _ => Err(format!(
-            "expected a positive number of seconds, got \"{text}\""
+            "expected a positive number of seconds, at most {MAX_SECONDS} (a year), got \"{text}\""
         )),
     }
 }
 
+/// The largest fraction a flag takes: 100 (10,000%).
+const MAX_FRACTION: f64 = 100.0;
+
 fn parse_fraction(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
-        Ok(fraction) if fraction >= 0.0 && fraction.is_finite() => Ok(fraction),
+        Ok(fraction) if (0.0..=MAX_FRACTION).contains(&fraction) => Ok(fraction),
         _ => Err(format!(
-            "expected a fraction of 0 or more (0.25 = 25%), got \"{text}\""
+            "expected a fraction from 0 to {MAX_FRACTION} (0.25 = 25%), got \"{text}\""
         )),
     }
+}
+
+fn parse_positive(text: &str) -> Result<u64, String> {
+    text.parse::<u64>()
+        .ok()
+        .filter(|&count| count >= 1)
+        .ok_or_else(|| format!("expected a whole number of at least 1, got \"{text}\""))
+}
+
+fn parse_gif_frames(text: &str) -> Result<u32, String> {
+    text.parse::<u32>()
+        .ok()
+        .filter(|frames| (2..=1000).contains(frames))
+        .ok_or_else(|| format!("expected a whole number of frames from 2 to 1000, got \"{text}\""))
+}
+
+fn parse_max_fps(text: &str) -> Result<u32, String> {
+    text.parse::<u32>().map_err(|_| {
+        format!(
+            "expected a whole number of frames per second, 0 (as fast as it can) to {}, got \"{text}\"",
+            u32::MAX
+        )
+    })
 }
 
 #[cfg(test)]

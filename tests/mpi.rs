@@ -37,6 +37,47 @@ fn mpi_at_1_2_3_and_4_ranks_gives_the_serial_hash() {
     }
 }
 
+/// MPI ranks count what they send as ranks run as threads do: the count is written once,
+/// around any `Communicator`, and reaches the JSON summary through the launcher.
+#[test]
+fn mpi_ranks_count_what_they_send_as_ranks_run_as_threads_do() {
+    use collide::backend::comm::ThreadComm;
+    use collide::backend::distributed;
+    use collide::run::overrides::Overrides;
+    use collide::run::scene_file;
+
+    let scene = "experiments/scenes/seed-1000.toml";
+    let spec = scene_file::load(std::path::Path::new(scene), &Overrides::default()).unwrap();
+    for ranks in [2, 3] {
+        let outcomes: Vec<_> = std::thread::scope(|scope| {
+            let handles: Vec<_> = ThreadComm::group(ranks)
+                .into_iter()
+                .map(|comm| scope.spawn(|| distributed::run(&comm, &spec).unwrap()))
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        let threads = serde_json::to_value(&outcomes[0].as_ref().unwrap().summary).unwrap();
+        let mpi = summary(&[
+            "simulate",
+            scene,
+            "--backend",
+            "mpi",
+            "--ranks",
+            &ranks.to_string(),
+        ]);
+        assert!(mpi["messages_per_step_max"].as_f64().unwrap() > 0.0);
+        for field in [
+            "messages_per_step_max",
+            "messages_per_step_mean",
+            "bytes_per_step_max",
+            "bytes_per_step_mean",
+            "collectives_per_step",
+        ] {
+            assert_eq!(mpi[field], threads[field], "{field} at {ranks} ranks");
+        }
+    }
+}
+
 #[test]
 fn mpi_gives_the_serial_hash_for_a_pile_resting_under_gravity() {
     let scene = "experiments/scenes/granular-pile.toml";

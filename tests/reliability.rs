@@ -150,6 +150,7 @@ fn sample_row(study: &str) -> records::Record {
         build_id: "b",
         config_key: "k",
         scene: "s",
+        scene_hash: "0123456789abcdef",
         scaling: "strong",
         backend: BackendKind::Serial,
         workers: 1,
@@ -263,9 +264,9 @@ fn unreadable_scenes_and_manifests_are_named_with_their_reason_once() {
     let folder = dir.path().to_str().unwrap();
     let cases: [(&[&str], &str); 4] = [
         (&["simulate", missing], "No such file or directory"),
-        (&["simulate", folder], "Is a directory"),
+        (&["simulate", folder], "is a folder, not a regular file"),
         (&["run", missing], "No such file or directory"),
-        (&["run", folder], "Is a directory"),
+        (&["run", folder], "is a folder, not a regular file"),
     ];
     for (args, reason) in cases {
         let stderr = refused(args);

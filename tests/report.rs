@@ -29,6 +29,9 @@ fn environment() -> Environment {
 }
 
 fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -> RunSummary {
+    // What an MPI rank sends per step grows with the other ranks it sends to.
+    let sent =
+        |per_other_rank: f64| (backend == "mpi").then(|| per_other_rank * (ranks - 1) as f64);
     RunSummary {
         n,
         steps: 400,
@@ -54,6 +57,11 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         broad_phase_s: 0.6 * wall_s,
         collision_s: 0.2 * wall_s,
         communication_s: 0.0,
+        messages_per_step_max: sent(4.5),
+        messages_per_step_mean: sent(4.25),
+        bytes_per_step_max: sent(2048.0),
+        bytes_per_step_mean: sent(1536.0),
+        collectives_per_step: (backend == "mpi").then_some(3.05),
         kinetic_energy_initial: 500.0,
         kinetic_energy_final: 500.0,
         momentum_initial: [0.0, 0.0],
@@ -107,13 +115,17 @@ fn study_records(scaling: &str) -> Vec<Record> {
     let mut records = Vec::new();
     for repetition in 0..3 {
         for (backend, workers, times) in runs {
-            let key = format!("{}-{workers}", backend.name());
+            let key = format!(
+                "scene=seed-1000;n=-;packing=-;dt=-;steps=-;seed=-;broadphase=-;backend={};workers={workers}",
+                backend.name()
+            );
             let context = RecordContext {
                 study: "synthetic",
                 manifest_hash: "m",
                 build_id: "b",
                 config_key: &key,
                 scene: "seed-1000",
+                scene_hash: "0123456789abcdef",
                 scaling,
                 backend,
                 workers: workers as u64,
@@ -226,7 +238,7 @@ fn drawn_runs_get_the_frames_per_second_figure_and_column() {
     // rayon at 2: median 0.0056 s for 400 steps, 71429 steps/s; drawing three times as
     // long, 400 / 0.0224 s = 17857 frames/s.
     assert!(
-        text.contains("| rayon | 2 | 1.82 | 91% | 0.098 | 71429 | 17857 |"),
+        text.contains("| rayon | 2 | 1.82 | 91% | 0.098 | 71429 | — | — | 17857 |"),
         "{text}"
     );
     assert!(text.contains("setup-1-fps-drawing.png"), "{text}");
@@ -244,6 +256,16 @@ fn speedups_efficiencies_and_warnings_are_computed_from_the_medians() {
     // rayon at 2: S = 0.0102 / 0.0056 = 1.82, E = 91%; Karp–Flatt (1/1.82 − 1/2)/(1/2) = 0.098.
     assert!(
         text.contains("| rayon | 2 | 1.82 | 91% | 0.098 |"),
+        "{text}"
+    );
+    // What the busiest MPI rank sent per step beside its timings (4.5 messages and 2 KiB
+    // to each other rank); nothing for the other backends.
+    assert!(
+        text.contains("| mpi | 4 | 0.85 | 21% | 1.235 | 33333 | 13.5 | 6.0 |"),
+        "{text}"
+    );
+    assert!(
+        text.contains("| serial | 1 | 1.00 | 100% | — | 39216 | — | — |"),
         "{text}"
     );
     assert!(text.contains("Warning: oversubscribed"), "{text}");

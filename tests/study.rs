@@ -296,7 +296,7 @@ fn an_unwritable_results_folder_is_a_clear_error() {
     let blocker = scene_file(dir.path(), "not-a-folder", "");
     let stderr = stderr_of(&["run", &path, "--out", blocker.to_str().unwrap()]);
     assert!(
-        stderr.contains("cannot create the results folder") && stderr.contains("--out"),
+        stderr.contains("is a file, not a folder") && stderr.contains("--out"),
         "{stderr}"
     );
 }

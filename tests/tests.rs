@@ -8,6 +8,7 @@ mod check;
 mod cli;
 mod faults;
 mod golden;
+mod hazards;
 mod limits;
 #[cfg(feature = "mpi")]
 mod mpi;

@@ -81,6 +81,7 @@ pub fn sample_records() -> Vec<Record> {
         build_id: "b",
         config_key: "k",
         scene: "seed",
+        scene_hash: "0123456789abcdef",
         scaling: "strong",
         backend: BackendKind::Rayon,
         workers: 2,

@@ -20,7 +20,7 @@ use std::collections::HashMap;
 use std::ops::{ControlFlow, Range};
 use std::time::Instant;
 
-use crate::backend::comm::Communicator;
+use crate::backend::comm::{Communicator, Counting, RankTraffic, Traffic};
 use crate::backend::{
     Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
     summarize, timed,
@@ -44,6 +44,7 @@ use crate::sim::{Boundary, Particles, StepCounters};
 /// the summary and the whole final state; the other ranks return `None`.
 pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcome>, BackendError> {
     let setup_start = Instant::now();
+    let comm = &Counting::new(comm);
     // Every rank builds the same initial state from the seed and keeps its slab.
     let prepared = spec.prepare()?;
     let scene = &prepared.scene;
@@ -58,10 +59,14 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     comm.barrier();
     let setup_s = setup_start.elapsed().as_secs_f64();
 
+    // What the stepping loop sends: set-up and the reductions below are not counted,
+    // as they are not timed.
+    let sent_before = comm.traffic();
     let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, |_| {
         rank.step(comm, prepared.params.dt);
         ControlFlow::Continue(())
     });
+    let sent = comm.traffic().since(&sent_before);
 
     // Collective reductions: the whole state and the counters, on every rank.
     let mut mine = Vec::with_capacity(rank.particles.len() * PACKED_LEN);
@@ -84,6 +89,12 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         c.virial,
         seconds.cpu.unwrap_or(f64::NAN),
         c.max_wall_penetration,
+        // Counts below 2⁵³: exact as f64.
+        sent.messages as f64,
+        sent.bytes as f64,
+        sent.exchanges as f64,
+        sent.all_gathers as f64,
+        sent.barriers as f64,
     ];
     let all_figures = comm.all_gather(&figures);
     if comm.rank() != 0 {
@@ -98,6 +109,7 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     let mut slowest_wall_s = 0.0_f64;
     // Summed in rank order: the same total on every run of the same measurements.
     let mut cpu_s = 0.0_f64;
+    let mut sent_by_rank = Vec::with_capacity(all_figures.len());
     for f in &all_figures {
         counters.merge(&StepCounters {
             pair_collisions: f[0] as u64,
@@ -114,6 +126,13 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         stages.collisions = stages.collisions.max(f[6]);
         stages.communication = stages.communication.max(f[7]);
         cpu_s += f[10];
+        sent_by_rank.push(Traffic {
+            messages: f[12] as u64,
+            bytes: f[13] as u64,
+            exchanges: f[14] as u64,
+            all_gathers: f[15] as u64,
+            barriers: f[16] as u64,
+        });
     }
     let measured = Measured {
         setup_s,
@@ -125,6 +144,7 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         accuracy: Accuracy::default(),
         // Drawing needs every disk in one process: refused before an MPI run starts.
         draw_s: None,
+        traffic: Some(RankTraffic::over(&sent_by_rank)),
     };
     let workers = Workers {
         backend: BackendKind::Mpi,
@@ -778,6 +798,53 @@ mod tests {
                 summary.max_wall_penetration, reference.max_wall_penetration,
                 "{ranks} ranks"
             );
+        }
+    }
+
+    /// What a rank sends per step, by the [`Communicator`] docs' count. Every step calls
+    /// three collectives (the escapee reports' all-gather, the halo exchange, the shared
+    /// contacts' all-gather) and a rebuild a fourth (the migration's exchange), whatever
+    /// P. Each sends its counts to every other rank; the all-gathers send their data to
+    /// every other rank too (the reports always, the shared contacts when there are
+    /// any), while the halo and the migrants go to neighbours only. So a rank sends
+    /// between (4 + f)·(P − 1) and (5 + f)·(P − 1) + 1 + 2f messages per step, f the
+    /// share of steps that rebuild: it grows like P − 1. That is today's truth and the
+    /// reason for the neighbour-only decomposition, which must make it flat in P.
+    #[test]
+    fn messages_per_rank_and_step_grow_like_the_other_ranks_collectives_do_not() {
+        let spec = spec(Boundary::Periodic, 1.0, 0.35);
+        assert_eq!(
+            serial::run(&spec).unwrap().summary.messages_per_step_max,
+            None
+        );
+        let alone = run_on_threads(&spec, 1).summary;
+        assert_eq!(alone.messages_per_step_max, Some(0.0));
+        assert_eq!(alone.bytes_per_step_max, Some(0.0));
+        let collectives = alone.collectives_per_step.unwrap();
+        let rebuilds = collectives - 3.0;
+        assert!((0.0..=1.0).contains(&rebuilds), "{collectives}");
+        for ranks in [2, 4, 8] {
+            let summary = run_on_threads(&spec, ranks).summary;
+            assert_eq!(
+                summary.collectives_per_step,
+                Some(collectives),
+                "{ranks} ranks"
+            );
+            let others = (ranks - 1) as f64;
+            let fewest = (4.0 + rebuilds) * others;
+            let most = (5.0 + rebuilds) * others + 1.0 + 2.0 * rebuilds;
+            let (mean, max) = (
+                summary.messages_per_step_mean.unwrap(),
+                summary.messages_per_step_max.unwrap(),
+            );
+            assert!(
+                fewest <= mean && mean <= max && max <= most,
+                "{ranks} ranks: {summary}"
+            );
+            // At least the counts of every collective and the reports' headers.
+            let bytes = summary.bytes_per_step_mean.unwrap();
+            let counts_and_headers = (4.0 * collectives + 16.0) * others;
+            assert!(bytes > counts_and_headers, "{ranks} ranks: {summary}");
         }
     }
 

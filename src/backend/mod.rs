@@ -17,6 +17,7 @@ use std::num::NonZeroUsize;
 use std::ops::ControlFlow;
 use std::time::Instant;
 
+use crate::backend::comm::RankTraffic;
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::{InjectedSlowdown, Method, PreparedRun};
 use crate::run::summary::RunSummary;
@@ -158,6 +159,8 @@ pub struct Measured {
     /// Seconds drawing every step offscreen (`draw = true`), outside `wall_s`; `None`
     /// when the run did not draw.
     pub draw_s: Option<f64>,
+    /// What the ranks sent in the stepping loop (MPI only).
+    pub traffic: Option<RankTraffic>,
 }
 
 /// What a backend observed beyond the counters; `None` where it does not observe it.
@@ -228,6 +231,8 @@ pub fn summarize(
     );
     let elastic = physics.is_elastic();
     let is_event = prepared.method == Method::Event;
+    let per_step = |total: f64| (steps > 0).then(|| total / steps as f64);
+    let traffic = measured.traffic.as_ref();
     let missed = if is_event {
         Some(0)
     } else {
@@ -260,6 +265,11 @@ pub fn summarize(
         broad_phase_s: measured.stages.broad_phase,
         collision_s: measured.stages.collisions,
         communication_s: measured.stages.communication,
+        messages_per_step_max: traffic.and_then(|t| per_step(t.messages_max as f64)),
+        messages_per_step_mean: traffic.and_then(|t| per_step(t.messages_mean)),
+        bytes_per_step_max: traffic.and_then(|t| per_step(t.bytes_max as f64)),
+        bytes_per_step_mean: traffic.and_then(|t| per_step(t.bytes_mean)),
+        collectives_per_step: traffic.and_then(|t| per_step(t.collectives as f64)),
         kinetic_energy_initial: measured.initial.kinetic_energy,
         kinetic_energy_final: final_observables.kinetic_energy,
         momentum_initial: measured.initial.momentum,

@@ -6,7 +6,7 @@ use mpi::datatype::{Partition, PartitionMut};
 use mpi::topology::SimpleCommunicator;
 use mpi::traits::{Communicator as _, CommunicatorCollectives};
 
-use crate::backend::comm::Communicator;
+use crate::backend::comm::{COUNT_BYTES, Communicator};
 use crate::backend::{BackendError, RunOutcome, distributed};
 use crate::run::spec::RunSpec;
 
@@ -35,6 +35,9 @@ pub fn run_rank(spec: &RunSpec, ranks: Option<usize>) -> Result<Option<RunOutcom
     }
     distributed::run(&comm, spec)
 }
+
+// The counts round of an exchange or all-gather sends these, as the trait's docs count.
+const _: () = assert!(size_of::<Count>() as u64 == COUNT_BYTES);
 
 struct MpiComm {
     world: SimpleCommunicator,

@@ -116,6 +116,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
         initial,
         accuracy,
         draw_s,
+        traffic: None,
     };
     let workers = Workers {
         backend: BackendKind::Serial,

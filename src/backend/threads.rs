@@ -105,6 +105,7 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
         initial,
         accuracy: Accuracy::default(),
         draw_s,
+        traffic: None,
     };
     let workers = Workers {
         backend: BackendKind::Rayon,

@@ -148,14 +148,24 @@ pub fn binary(
 ) -> anyhow::Result<PathBuf> {
     let cached = cache.join(&rev.commit).join("collide");
     if cached.is_file() {
-        if !quiet {
-            println!(
-                "against {}: the build cached in {}",
-                short(&rev.commit),
-                cached.display()
-            );
+        if runs_simulate(&cached, rev).is_ok() {
+            if !quiet {
+                crate::outln!(
+                    "against {}: the build cached in {}",
+                    short(&rev.commit),
+                    cached.display()
+                );
+            }
+            return Ok(cached);
         }
-        return runs_simulate(&cached, rev).map(|()| cached);
+        // A damaged cache (a truncated copy, a wrong file) is rebuilt, not trusted.
+        eprintln!(
+            "warning: the build cached in {} does not run; building {} again",
+            cached.display(),
+            short(&rev.commit)
+        );
+        std::fs::remove_file(&cached)
+            .with_context(|| format!("cannot remove the damaged build {}", cached.display()))?;
     }
     std::fs::create_dir_all(cache)
         .with_context(|| format!("cannot create the build cache {}", cache.display()))?;
@@ -202,7 +212,7 @@ impl Scratch {
         let profile = this.profile_dir.file_name().expect("a profile folder");
         copy_dependencies(&this.profile_dir, &self.target.join(profile))?;
         if !quiet {
-            println!(
+            crate::outln!(
                 "against {commit}: building with `cargo {}` in {}",
                 this.cargo_args.join(" "),
                 self.worktree.display()
@@ -222,7 +232,8 @@ impl Scratch {
         Ok(self.target.join(profile).join("collide"))
     }
 
-    /// Removes the worktree and the copied target folder, if there.
+    /// Removes the worktree (its folder and git's registration of it: only this one, never
+    /// the user's other worktrees) and the copied target folder, if there.
     fn clear(&self) {
         if self.worktree.exists() {
             let _ = Command::new("git")
@@ -232,10 +243,7 @@ impl Scratch {
                 .output();
             let _ = std::fs::remove_dir_all(&self.worktree);
         }
-        let _ = Command::new("git")
-            .current_dir(&self.repo)
-            .args(["worktree", "prune"])
-            .output();
+        forget_worktree(&self.repo, &self.worktree);
         let _ = std::fs::remove_dir_all(&self.target);
     }
 }
@@ -243,6 +251,37 @@ impl Scratch {
 impl Drop for Scratch {
     fn drop(&mut self) {
         self.clear();
+    }
+}
+
+/// Removes git's registration of the worktree at `path` if its folder is gone (what
+/// `git worktree prune` does, for this one worktree only): the registration whose
+/// `gitdir` file names `path/.git`.
+fn forget_worktree(repo: &Path, path: &Path) {
+    let Ok(out) = Command::new("git")
+        .current_dir(repo)
+        .args(["rev-parse", "--path-format=absolute", "--git-common-dir"])
+        .output()
+    else {
+        return;
+    };
+    let common = PathBuf::from(String::from_utf8_lossy(&out.stdout).trim());
+    let Ok(registrations) = std::fs::read_dir(common.join("worktrees")) else {
+        return;
+    };
+    // git records the worktree's real path: its folder's, links resolved.
+    let folder = path
+        .parent()
+        .and_then(|parent| std::fs::canonicalize(parent).ok());
+    let (Some(folder), Some(name)) = (folder, path.file_name()) else {
+        return;
+    };
+    let ours = folder.join(name);
+    for registration in registrations.flatten().map(|entry| entry.path()) {
+        let gitdir = std::fs::read_to_string(registration.join("gitdir")).unwrap_or_default();
+        if Path::new(gitdir.trim()) == ours.join(".git") && !ours.exists() {
+            let _ = std::fs::remove_dir_all(&registration);
+        }
     }
 }
 

@@ -183,6 +183,11 @@ struct AbCheck {
 /// comparisons, the summary and the history. Records a new baseline instead with
 /// `--update-baseline`.
 pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
+    // Refused before anything is measured, not after.
+    if let Some(dir) = &options.history {
+        crate::system::output::check_output_folder(dir, "--history")?;
+    }
+    crate::system::output::check_output_folder(&options.out, "--out")?;
     let (study, text) = manifest::load(&options.manifest)?;
     let environment = Environment::capture();
     let manifest_hash = runner::manifest_hash(&text);
@@ -221,7 +226,7 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
     )?;
     let Some((old_info, old_rows)) = baseline else {
         write_baseline(&options.baseline, &info, &rows)?;
-        println!(
+        crate::outln!(
             "baseline recorded in {} ({} runs, {} calibrations); commit it",
             options.baseline.display(),
             rows.len(),
@@ -255,10 +260,10 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
         ab.as_ref(),
         timings_decide,
     );
-    print!("{text}");
+    crate::out!("{text}");
     let path = options.out.join("summary.md");
     write_atomically(&path, |out| out.write_all(text.as_bytes()))?;
-    println!("summary written to {}", path.display());
+    crate::outln!("summary written to {}", path.display());
     let deciding: Vec<&Row> = match &ab {
         Some(ab) => ab.rows.iter().collect(),
         None => compared
@@ -302,6 +307,8 @@ fn measure(
     let run_options = RunOptions {
         out: options.out.clone(),
         resume: false,
+        // A check's verdict needs every run of one sitting: it never resumes.
+        continue_with: "a new `collide check` (a check starts over; it does not resume)".to_owned(),
         quiet: options.quiet,
         programs,
         calibrate: true,
@@ -353,7 +360,7 @@ fn append_history(
         .collect();
     let path = history::append(dir, &info.environment, &entries)?;
     if !quiet {
-        println!(
+        crate::outln!(
             "history: {} row(s) appended in {}",
             entries.len(),
             path.display()
@@ -443,7 +450,58 @@ fn load_baseline(
     }
     let records = records::read(&dir.join(BASELINE_RECORDS))
         .with_context(|| format!("the baseline's records cannot be read; {re_record}"))?;
+    if let Err(field) = impossible_in(&info, &records) {
+        bail!(
+            "the baseline in {} has {field}, which no measurement gives: it was edited or \
+             damaged; restore it from git, or {re_record}",
+            dir.display()
+        );
+    }
     Ok((info, records))
+}
+
+/// The first value of a baseline that no run can have measured (a time or count of zero
+/// or less, or not a number), named with its field; the check would divide by it.
+fn impossible_in(info: &BaselineInfo, records: &[Record]) -> Result<(), String> {
+    let positive = |value: f64| value.is_finite() && value > 0.0;
+    for (round, calibration) in info.calibrations.iter().enumerate() {
+        if !positive(calibration.calibration_s) {
+            return Err(format!(
+                "`calibrations[{round}].calibration_s` = {}",
+                calibration.calibration_s
+            ));
+        }
+        if let Some(cpu) = calibration.calibration_cpu_s.filter(|&cpu| !positive(cpu)) {
+            return Err(format!("`calibrations[{round}].calibration_cpu_s` = {cpu}"));
+        }
+    }
+    if let Some(count) = info
+        .instructions
+        .iter()
+        .find(|count| count.instructions == 0)
+    {
+        return Err(format!(
+            "`instructions` = 0 for the {} backend",
+            count.backend
+        ));
+    }
+    let measured = records.iter().filter(|row| row.status == STATUS_OK);
+    if let Some(row) = measured.clone().find(|row| !positive(row.wall_s)) {
+        return Err(format!(
+            "`wall_s` = {} in a row of {}",
+            row.wall_s, row.config_key
+        ));
+    }
+    match measured
+        .clone()
+        .find(|row| row.cpu_s.is_finite() && row.cpu_s <= 0.0)
+    {
+        Some(row) => Err(format!(
+            "`cpu_s` = {} in a row of {}",
+            row.cpu_s, row.config_key
+        )),
+        None => Ok(()),
+    }
 }
 
 fn write_baseline(dir: &Path, info: &BaselineInfo, rows: &[Record]) -> anyhow::Result<()> {
@@ -1054,6 +1112,33 @@ fn write_table(out: &mut String, rows: &[Row], (old, new): (&str, &str)) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_baseline_with_zero_times_or_counts_is_refused_naming_the_field() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("results/baseline");
+        let text = std::fs::read_to_string(dir.join(BASELINE_INFO)).unwrap();
+        let info: BaselineInfo = serde_json::from_str(&text).unwrap();
+        let rows = records::read(&dir.join(BASELINE_RECORDS)).unwrap();
+        assert_eq!(impossible_in(&info, &rows), Ok(()));
+        let mut zero_calibration = info.clone();
+        zero_calibration.calibrations[0].calibration_s = 0.0;
+        let named = impossible_in(&zero_calibration, &rows).unwrap_err();
+        assert!(named.contains("calibration_s"), "{named}");
+        if !info.instructions.is_empty() {
+            let mut zero_count = info.clone();
+            zero_count.instructions[0].instructions = 0;
+            let named = impossible_in(&zero_count, &rows).unwrap_err();
+            assert!(named.contains("`instructions` = 0"), "{named}");
+        }
+        let mut zero_time = rows.clone();
+        let ok = zero_time
+            .iter()
+            .position(|row| row.status == STATUS_OK)
+            .unwrap();
+        zero_time[ok].wall_s = 0.0;
+        let named = impossible_in(&info, &zero_time).unwrap_err();
+        assert!(named.contains("wall_s"), "{named}");
+    }
 
     #[test]
     fn timings_decide_only_on_the_boot_the_baseline_was_recorded_on() {

@@ -26,6 +26,10 @@ pub struct Point {
     /// when none did).
     pub fps_with_drawing: f64,
     pub oversubscribed: bool,
+    /// MPI: median messages and bytes per step of the rank that sent most (NaN for
+    /// serial and rayon, and in files older than schema version 9).
+    pub messages_per_step: f64,
+    pub bytes_per_step: f64,
     /// Strong scaling: T(baseline) / T(p), with [`Setup::baseline`]. Weak scaling: the
     /// scaled speedup p·E(p).
     pub speedup: f64,
@@ -80,6 +84,9 @@ pub struct Setup {
     pub broadphase: String,
     /// Whether its runs drew every step offscreen (`draw = true`).
     pub drawn: bool,
+    /// The other values its configurations set (`method=event`, `tc=0`, ...), which tell
+    /// it apart from setups of the same scene, n, steps, dt and packing.
+    pub settings: Vec<String>,
     /// Serial first, then rayon, then MPI.
     pub backends: Vec<BackendScaling>,
     /// The most distinct final-state hashes among the successful runs of one physical
@@ -105,6 +112,9 @@ impl Setup {
         self.backends.iter().map(|b| b.points.len()).sum::<usize>() > 1
     }
 }
+
+/// The settings a setup's description shows by their own fields.
+const DESCRIBED: [&str; 5] = ["steps", "dt", "packing", "broadphase", "draw"];
 
 /// The successful records grouped into setups (in the manifest's order), each analysed
 /// per backend. The grouping, medians and spreads are polars aggregations.
@@ -143,6 +153,7 @@ pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {
                     packing: first.packing,
                     broadphase: first.broadphase.clone(),
                     drawn: first.drew(),
+                    settings: first.settings(&DESCRIBED),
                     backends: Vec::new(),
                     distinct_hashes: hashes.get(&series).copied().unwrap_or(1),
                 });
@@ -191,6 +202,10 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Poi
             col("fps").median().alias("fps"),
             col("fps_with_drawing").median().alias("fps_with_drawing"),
             col("oversubscribed").any(true).alias("oversubscribed"),
+            col("messages_per_step_max")
+                .median()
+                .alias("messages_per_step"),
+            col("bytes_per_step_max").median().alias("bytes_per_step"),
         ])
         .collect()?;
     let series = table.column("series")?.str()?;
@@ -203,6 +218,8 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Poi
     let fps = table.column("fps")?.f64()?;
     let fps_with_drawing = table.column("fps_with_drawing")?.f64()?;
     let oversubscribed = table.column("oversubscribed")?.bool()?;
+    let messages_per_step = table.column("messages_per_step")?.f64()?;
+    let bytes_per_step = table.column("bytes_per_step")?.f64()?;
     Ok((0..table.height())
         .map(|i| {
             let point = Point {
@@ -214,6 +231,8 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Poi
                 fps: fps.get(i).unwrap_or(f64::NAN),
                 fps_with_drawing: fps_with_drawing.get(i).unwrap_or(f64::NAN),
                 oversubscribed: oversubscribed.get(i).unwrap_or_default(),
+                messages_per_step: messages_per_step.get(i).unwrap_or(f64::NAN),
+                bytes_per_step: bytes_per_step.get(i).unwrap_or(f64::NAN),
                 speedup: f64::NAN,
                 efficiency: f64::NAN,
                 karp_flatt: f64::NAN,
@@ -347,6 +366,8 @@ mod tests {
             fps: 1.0 / median_s,
             fps_with_drawing: f64::NAN,
             oversubscribed: false,
+            messages_per_step: f64::NAN,
+            bytes_per_step: f64::NAN,
             speedup: f64::NAN,
             efficiency: f64::NAN,
             karp_flatt: f64::NAN,

@@ -66,8 +66,9 @@ pub fn markdown(records: &[Record], setups: &[Setup], source: &str, pictures: &P
     let _ = writeln!(out, "# {kind} report: study `{}`\n", first.study);
     let _ = writeln!(
         out,
-        "Regenerate with `collide run experiments/{}.toml`, then `collide report {source}`.\n",
-        first.study
+        "Regenerate with `collide run experiments/{}.toml`, then {}.\n",
+        first.study,
+        inline_code(&format!("collide report {source}"))
     );
     if let Some(scene) = &pictures.scene {
         let _ = writeln!(
@@ -277,8 +278,12 @@ pub fn describe(setup: &Setup) -> String {
     } else {
         ""
     };
+    let settings = match setup.settings.is_empty() {
+        true => String::new(),
+        false => format!(", {}", setup.settings.join(", ")),
+    };
     format!(
-        "scene `{}`, {n}, {} steps of dt = {}, packing {:.3}, {} broad phase{drawn}",
+        "scene `{}`, {n}, {} steps of dt = {}, packing {:.3}, {} broad phase{settings}{drawn}",
         setup.scene, setup.steps, setup.dt, setup.packing, setup.broadphase
     )
 }
@@ -367,9 +372,17 @@ fn speedup_table(out: &mut String, setup: &Setup) {
     } else {
         ("", "")
     };
+    // What the busiest rank sent, beside the timings, where any MPI run counted it.
+    let sent =
+        (setup.backends.iter()).any(|b| b.points.iter().any(|p| p.messages_per_step.is_finite()));
+    let (sent_header, sent_rule) = if sent {
+        (" messages/step | KiB/step |", " ---: | ---: |")
+    } else {
+        ("", "")
+    };
     let _ = writeln!(
         out,
-        "\n| backend | workers | speedup S(p) | efficiency E(p) | Karp–Flatt e(p) | steps/s |{drawn_header}\n| --- | ---: | ---: | ---: | ---: | ---: |{drawn_rule}"
+        "\n| backend | workers | speedup S(p) | efficiency E(p) | Karp–Flatt e(p) | steps/s |{drawn_header}{sent_header}\n| --- | ---: | ---: | ---: | ---: | ---: |{drawn_rule}{sent_rule}"
     );
     for backend in &setup.backends {
         for point in &backend.points {
@@ -379,9 +392,19 @@ fn speedup_table(out: &mut String, setup: &Setup) {
             } else {
                 String::new()
             };
+            let sent = if sent {
+                let (messages, bytes) = (point.messages_per_step, point.bytes_per_step);
+                format!(
+                    " {} | {} |",
+                    finite_or_dash(messages, format!("{messages:.1}")),
+                    finite_or_dash(bytes, format!("{:.1}", bytes / 1024.0))
+                )
+            } else {
+                String::new()
+            };
             let _ = writeln!(
                 out,
-                "| {} | {} | {:.2} | {:.0}% | {karp_flatt} | {:.0} |{drawn}",
+                "| {} | {} | {:.2} | {:.0}% | {karp_flatt} | {:.0} |{drawn}{sent}",
                 backend.backend,
                 point.workers,
                 point.speedup,
@@ -404,6 +427,14 @@ fn speedup_table(out: &mut String, setup: &Setup) {
         .collect();
     // A blank line ends the table, whatever follows it.
     let _ = writeln!(out);
+    if sent {
+        let _ = writeln!(
+            out,
+            "Messages/step and KiB/step: what the MPI rank that sent most sent per step of \
+             the stepping loop (median of the repetitions), each collective counted as MPI's \
+             linear algorithms send it (see `messages_per_step_max` in docs/records.md).\n"
+        );
+    }
     if setup.drawn {
         let _ = writeln!(
             out,
@@ -687,16 +718,37 @@ fn cooling_section(out: &mut String, curves: &[CoolingCurve]) {
     let _ = writeln!(out, "\n![{COOLING_FILE}]({COOLING_FILE})\n");
 }
 
+/// `text` (a path the user chose, which may hold anything) as a Markdown code span:
+/// control characters escaped, and fenced by more backticks than it holds in a row, so
+/// nothing in it is read as Markdown or HTML, nor sent to a terminal as a command.
+pub fn inline_code(text: &str) -> String {
+    let text: String = text
+        .chars()
+        .flat_map(|c| match c.is_control() {
+            true => c.escape_default().collect::<Vec<_>>(),
+            false => vec![c],
+        })
+        .collect();
+    let longest = text.split(|c| c != '`').map(str::len).max().unwrap_or(0);
+    let fence = "`".repeat(longest + 1);
+    let pad = if text.starts_with('`') || text.ends_with('`') {
+        " "
+    } else {
+        ""
+    };
+    format!("{fence}{pad}{text}{pad}{fence}")
+}
+
 /// The report of a check history (read from `source`): its figure, then one row per
 /// verdict, oldest check first.
 pub fn history(entries: &[Entry], source: &Path) -> String {
     let mut out = format!(
-        "# collide check history\n\nFrom `{}`: {} verdict(s) of {} check(s). Ratio = this \
+        "# collide check history\n\nFrom {}: {} verdict(s) of {} check(s). Ratio = this \
          build over what the check compared it with (the build it was checked against in an \
          A/B check, or the baseline), with its 95% interval.\n\n![ratios over commits]({})\n\n\
          | checked (UTC) | commit | compared with | configuration | measure | ratio | 95% interval | verdict |\n\
          | --- | --- | --- | --- | --- | ---: | --- | --- |\n",
-        source.display(),
+        inline_code(&source.display().to_string()),
         entries.len(),
         checks(entries).len(),
         HISTORY_FILE,
@@ -721,4 +773,19 @@ pub fn history(entries: &[Entry], source: &Path) -> String {
         );
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::inline_code;
+
+    #[test]
+    fn a_path_with_backticks_markup_and_escapes_stays_one_code_span() {
+        assert_eq!(inline_code("results/tiny"), "`results/tiny`");
+        assert_eq!(inline_code("a`b``c"), "```a`b``c```");
+        assert_eq!(inline_code("`x"), "`` `x ``");
+        let escaped = inline_code("r/\u{1b}[31m<b>|");
+        assert!(!escaped.contains('\u{1b}'), "{escaped}");
+        assert_eq!(escaped, "`r/\\u{1b}[31m<b>|`");
+    }
 }

@@ -61,6 +61,14 @@ pub fn load(path: &Path) -> anyhow::Result<Vec<Record>> {
     for reason in &skipped {
         eprintln!("warning: skipped {reason}");
     }
+    let (all, copies) = records::without_copies(all);
+    if copies > 0 {
+        eprintln!(
+            "warning: {copies} row(s) in {} are copies of runs in another file there (a \
+             backup, or rows a resumed study carried over); each run is counted once",
+            path.display()
+        );
+    }
     if all.is_empty() {
         bail!(
             "no readable runs in {}: every results file there was skipped (see the warnings); \
@@ -146,18 +154,36 @@ pub struct StudyFolder {
     pub n_files: usize,
 }
 
-/// The subfolders of `dir` that hold `.parquet` files, by name.
+/// How many folder levels below the one named [`study_folders`] looks for studies.
+const STUDY_DEPTH: usize = 3;
+
+/// The folders below `dir` (down to [`STUDY_DEPTH`] levels, not below a study folder)
+/// that hold `.parquet` files, by path.
 pub fn study_folders(dir: &Path) -> anyhow::Result<Vec<StudyFolder>> {
     let mut folders = Vec::new();
-    let entries =
-        std::fs::read_dir(dir).with_context(|| format!("cannot list {}", dir.display()))?;
-    for path in entries.filter_map(|entry| entry.ok().map(|e| e.path())) {
-        if path.is_dir() {
-            let n_files = records::files_in(&path).map_or(0, |files| files.len());
-            if n_files > 0 {
-                folders.push(StudyFolder { path, n_files });
+    let mut level = vec![dir.to_path_buf()];
+    for depth in 0..STUDY_DEPTH {
+        let mut next = Vec::new();
+        for parent in &level {
+            let entries = match std::fs::read_dir(parent) {
+                Ok(entries) => entries,
+                Err(_) if depth > 0 => continue,
+                Err(err) => {
+                    return Err(err).with_context(|| format!("cannot list {}", dir.display()));
+                }
+            };
+            // Links are not followed: a link to a parent folder would loop.
+            let subfolders = entries
+                .flatten()
+                .filter(|entry| entry.file_type().is_ok_and(|kind| kind.is_dir()));
+            for path in subfolders.map(|entry| entry.path()) {
+                match records::files_in(&path).map_or(0, |files| files.len()) {
+                    0 => next.push(path),
+                    n_files => folders.push(StudyFolder { path, n_files }),
+                }
             }
         }
+        level = next;
     }
     folders.sort_by(|a, b| a.path.cmp(&b.path));
     Ok(folders)
@@ -248,12 +274,20 @@ pub fn one_study<'a>(records: &'a [Record], path: &Path) -> anyhow::Result<&'a s
 
 /// The table, one line per configuration in first-seen order, then the hash check.
 pub fn table(records: &[Record]) -> String {
-    let mut order: Vec<&str> = Vec::new();
-    let mut groups: BTreeMap<&str, Vec<&Record>> = BTreeMap::new();
+    let mut order: Vec<String> = Vec::new();
+    let mut groups: BTreeMap<String, Vec<&Record>> = BTreeMap::new();
     for record in records {
-        let group = groups.entry(&record.config_key).or_default();
+        // What was computed, where, and by which side of an A/B check: never pooled across.
+        let key = format!(
+            "{}|{}|{}|{}",
+            record.setup_key(),
+            record.backend,
+            record.workers,
+            record.ab_side
+        );
+        let group = groups.entry(key.clone()).or_default();
         if group.is_empty() {
-            order.push(&record.config_key);
+            order.push(key);
         }
         group.push(record);
     }
@@ -304,17 +338,18 @@ pub fn table(records: &[Record]) -> String {
 /// One line per physical setup (scene, n, steps, dt, seed, packing) measured by more than
 /// one configuration: whether every successful run gave the same final state.
 fn hash_agreement(records: &[Record]) -> String {
-    let mut setups: BTreeMap<String, BTreeMap<&str, Vec<String>>> = BTreeMap::new();
+    let mut setups: BTreeMap<String, (String, BTreeMap<&str, Vec<String>>)> = BTreeMap::new();
     for record in records.iter().filter(|r| r.status == STATUS_OK) {
         setups
             .entry(record.setup_key())
-            .or_default()
+            .or_insert_with(|| (record.setup_label(), BTreeMap::new()))
+            .1
             .entry(&record.state_hash)
             .or_default()
             .push(format!("{} {}", record.backend, record.workers));
     }
     let mut out = String::new();
-    for (setup, hashes) in &setups {
+    for (setup, hashes) in setups.values() {
         if hashes.len() == 1 {
             let _ = writeln!(out, "state_hash: all runs agree for {setup}");
         } else {

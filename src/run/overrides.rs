@@ -160,7 +160,7 @@ overrides! {
     #[arg(long, allow_hyphen_values = true)]
     steps: i64,
     /// Seed of the random initial state.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_seed, allow_negative_numbers = true)]
     seed: u64,
     /// Broad phase: grid (default) or allpairs (the seed's O(N²) search).
     #[arg(long, value_parser = parse_broadphase)]
@@ -212,6 +212,15 @@ fn parse_dt(text: &str) -> Result<DtValue, String> {
     text.parse::<f64>()
         .map(DtValue::Seconds)
         .map_err(|_| format!("expected a number or \"auto\", got \"{text}\""))
+}
+
+fn parse_seed(text: &str) -> Result<u64, String> {
+    text.parse::<u64>().map_err(|_| {
+        format!(
+            "expected a whole number from 0 to {}, got \"{text}\"",
+            u64::MAX
+        )
+    })
 }
 
 fn parse_broadphase(text: &str) -> Result<Broadphase, String> {

@@ -17,17 +17,16 @@ use crate::run::spec::{
 };
 use crate::sim::grid::StripGrid;
 use crate::sim::scene::{
-    Extent, GasSpec, MassRule, Placement, RSA_JAMMING_PACKING, RadiusDistribution,
-    check_periodic_box,
+    Extent, GasSpec, MassRule, Placement, RadiusDistribution, check_periodic_box,
 };
 use crate::sim::{Boundary, Broadphase, Disk, Domain, Particles, Physics, Scene};
-use crate::system::output::io_reason;
+use crate::system::input::{MAX_TEXT_BYTES, read_text};
 
 #[derive(Debug, thiserror::Error)]
 pub enum SceneFileError {
     /// The reason is kept as words, not as a source error: shown as a chain, the
     /// source would repeat it.
-    #[error("cannot read scene file {path}: {reason}; check the path")]
+    #[error("cannot read scene file {path}: {reason}")]
     Read { path: PathBuf, reason: String },
     #[error(
         "{path}:{line}: {message}; see docs/guide.md, Scene files, for the keys and values a scene accepts"
@@ -48,9 +47,9 @@ pub enum SceneFileError {
 
 /// Reads and validates a scene file, applying overrides.
 pub fn load(path: &Path, overrides: &Overrides) -> Result<RunSpec, SceneFileError> {
-    let text = std::fs::read_to_string(path).map_err(|err| SceneFileError::Read {
+    let text = read_text(path, MAX_TEXT_BYTES).map_err(|reason| SceneFileError::Read {
         path: path.to_owned(),
-        reason: io_reason(&err),
+        reason,
     })?;
     parse(path, &text, overrides)
 }
@@ -558,10 +557,7 @@ impl Validator<'_> {
                 ));
             }
             (Some(Sourced { value, origin }), None) => {
-                let limit = match placement {
-                    Placement::Random => RSA_JAMMING_PACKING,
-                    Placement::Lattice => std::f64::consts::FRAC_PI_4,
-                };
+                let limit = placement.max_packing();
                 if !(value > 0.0 && value <= limit) {
                     return Err(self.invalid(
                         origin,
@@ -598,10 +594,38 @@ impl Validator<'_> {
             }
             Some(Sourced { value, .. }) => value,
         };
+        let radius = self.radius(raw)?.0;
+        if let Extent::Size { width, height } = extent {
+            // The area fraction the box asks for, refused here with the box's line rather
+            // than by the placement later.
+            let packing = n_particles as f64 * radius.mean_area() / (width * height);
+            let limit = placement.max_packing();
+            if packing > limit {
+                return Err(self.invalid(
+                    self.origin_of(&raw.size),
+                    "scene.size",
+                    format!(
+                        "is {width} × {height}, where {n_particles} disks cover an area \
+                         fraction of {packing:.3}, above the {limit:.3} that {} placement reaches",
+                        placement.name()
+                    ),
+                    &match packing <= std::f64::consts::FRAC_PI_4 {
+                        true => "enlarge the box, lower n or the radius, or use placement = \
+                                 \"lattice\""
+                            .to_owned(),
+                        false => format!(
+                            "enlarge the box at least {:.2}-fold in area, or lower n or the radius \
+                             (no placement packs disks beyond π/4 ≈ 0.785)",
+                            packing / std::f64::consts::FRAC_PI_4
+                        ),
+                    },
+                ));
+            }
+        }
         Ok(GasSpec {
             n_particles,
             extent,
-            radius: self.radius(raw)?.0,
+            radius,
             mass: self.mass(raw)?,
             speed_rms,
             placement,

@@ -63,6 +63,24 @@ pub struct RunSummary {
     pub collision_s: f64,
     /// Seconds of `wall_s` exchanging data between MPI ranks (0 without MPI).
     pub communication_s: f64,
+    /// MPI: messages one rank sent per step of the stepping loop, the rank that sent most
+    /// (a collective's messages are counted as MPI's linear algorithms send them: see
+    /// `backend::comm::Communicator`); null for serial and rayon.
+    #[serde(default)]
+    pub messages_per_step_max: Option<f64>,
+    /// MPI: messages one rank sent per step, the mean over ranks; null for serial and rayon.
+    #[serde(default)]
+    pub messages_per_step_mean: Option<f64>,
+    /// MPI: bytes one rank sent per step, the rank that sent most; null for serial and rayon.
+    #[serde(default)]
+    pub bytes_per_step_max: Option<f64>,
+    /// MPI: bytes one rank sent per step, the mean over ranks; null for serial and rayon.
+    #[serde(default)]
+    pub bytes_per_step_mean: Option<f64>,
+    /// MPI: collectives (exchanges, all-gathers, barriers) each rank called per step, the
+    /// same on every rank; null for serial and rayon.
+    #[serde(default)]
+    pub collectives_per_step: Option<f64>,
     pub kinetic_energy_initial: f64,
     pub kinetic_energy_final: f64,
     /// Total momentum [px, py] before the first step.
@@ -219,6 +237,25 @@ impl fmt::Display for RunSummary {
             "stages     {:.4} s integration, {:.4} s broad phase, {:.4} s collisions, {:.4} s communication",
             self.integration_s, self.broad_phase_s, self.collision_s, self.communication_s
         )?;
+        if let (
+            Some(messages),
+            Some(messages_max),
+            Some(bytes),
+            Some(bytes_max),
+            Some(collectives),
+        ) = (
+            self.messages_per_step_mean,
+            self.messages_per_step_max,
+            self.bytes_per_step_mean,
+            self.bytes_per_step_max,
+            self.collectives_per_step,
+        ) {
+            writeln!(
+                f,
+                "sent       per rank per step: {messages:.1} messages (most {messages_max:.1}), \
+                 {bytes:.0} bytes (most {bytes_max:.0}), {collectives:.2} collectives"
+            )?;
+        }
         let relative_change = (self.kinetic_energy_final - self.kinetic_energy_initial)
             / self.kinetic_energy_initial.abs().max(f64::MIN_POSITIVE);
         writeln!(

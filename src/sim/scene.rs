@@ -226,6 +226,15 @@ impl Placement {
             Placement::Lattice => "lattice",
         }
     }
+
+    /// The largest area fraction this placement reaches: random sequential addition jams,
+    /// a square lattice holds at most π/4.
+    pub fn max_packing(self) -> f64 {
+        match self {
+            Placement::Random => RSA_JAMMING_PACKING,
+            Placement::Lattice => std::f64::consts::FRAC_PI_4,
+        }
+    }
 }
 
 /// How big the box is: by area fraction (square box) or by explicit size.

@@ -18,7 +18,7 @@ use crate::run::overrides::{Overrides, SweepLists, SweptList};
 use crate::run::scene_file;
 use crate::run::spec::{Footprint, RunSpec, SceneSource};
 use crate::study::names::check_name;
-use crate::system::output::io_reason;
+use crate::system::input::{MAX_TEXT_BYTES, read_text};
 
 /// A validated study: what to run, how often, and in which order.
 #[derive(Clone, Debug, PartialEq)]
@@ -92,6 +92,10 @@ pub struct Configuration {
     pub footprint: Footprint,
 }
 
+/// The entries of a configuration's key that place its runs (backend, workers) rather
+/// than say what they compute: a record's setup is its key without them.
+pub const PLACEMENT_KEYS: [&str; 2] = ["backend=", "workers="];
+
 impl Configuration {
     /// A stable text key naming the configuration: the same in every run of the same
     /// manifest, so `--resume` can tell what is already measured.
@@ -106,8 +110,9 @@ impl Configuration {
                 when_set.push_str(&format!(";{name}={value}"));
             }
         }
+        let [backend, workers] = PLACEMENT_KEYS;
         format!(
-            "scene={};{};backend={};workers={}{when_set}",
+            "scene={};{};{backend}{};{workers}{}{when_set}",
             self.scene,
             always.join(";"),
             self.backend.name(),
@@ -186,13 +191,8 @@ struct RawBackends {
 /// Reads and validates the manifest at `path` for this machine: the study, and the text
 /// it came from.
 pub fn load(path: &Path) -> anyhow::Result<(Study, String)> {
-    let text = std::fs::read_to_string(path).map_err(|err| {
-        anyhow::anyhow!(
-            "cannot read manifest {}: {}; check the path",
-            path.display(),
-            io_reason(&err)
-        )
-    })?;
+    let text = read_text(path, MAX_TEXT_BYTES)
+        .map_err(|reason| anyhow::anyhow!("cannot read manifest {}: {reason}", path.display()))?;
     Ok((parse(path, &text, &Machine::this())?, text))
 }
 
@@ -219,11 +219,14 @@ pub fn parse(path: &Path, text: &str, machine: &Machine) -> Result<Study, Manife
             .map_err(|message| at.invalid(warmups.span().start, message))?,
     };
     let timeout_s = raw.timeout_s.as_ref().map_or(600.0, |t| *t.get_ref());
-    if !(timeout_s > 0.0 && timeout_s.is_finite()) {
+    if !(timeout_s > 0.0 && timeout_s <= MAX_TIMEOUT_S) {
         let offset = raw.timeout_s.as_ref().map_or(0, |t| t.span().start);
         return Err(at.invalid(
             offset,
-            format!("`timeout_s` is {timeout_s}; give a positive number of seconds"),
+            format!(
+                "`timeout_s` is {timeout_s}; give a positive number of seconds, at most \
+                 {MAX_TIMEOUT_S} (a week)"
+            ),
         ));
     }
     let scaling = raw
@@ -309,6 +312,15 @@ impl Locator<'_> {
     }
 }
 
+/// The most configurations a study may have, and the most runs (configurations ×
+/// repetitions): beyond them a manifest is refused before anything is expanded, since
+/// at a tenth of a second a run such a study would last longer than a day.
+pub const MAX_CONFIGURATIONS: usize = 10_000;
+pub const MAX_RUNS: u64 = 1_000_000;
+
+/// The longest `timeout_s` accepted: a week.
+const MAX_TIMEOUT_S: f64 = 7.0 * 86_400.0;
+
 /// Every configuration of the manifest: each scene × sweep point × (backend, workers),
 /// in that order, each checked as `collide simulate` would check it, none twice.
 fn configurations(
@@ -326,6 +338,20 @@ fn configurations(
         return Err(at.invalid(
             raw.scenes.span().start,
             "`scenes` is empty; add a [[scenes]] entry with `file = ...` or inline tables".into(),
+        ));
+    }
+    let n_configurations = raw.scenes.get_ref().len() * points.len() * backends.len();
+    let most_repetitions = repetitions.iter().copied().max().unwrap_or(1);
+    let n_runs = n_configurations as u64 * u64::from(most_repetitions);
+    if n_configurations > MAX_CONFIGURATIONS || n_runs > MAX_RUNS {
+        return Err(at.invalid(
+            raw.scenes.span().start,
+            format!(
+                "the study has {n_configurations} configurations (scenes × sweep points × \
+                 backends) of up to {most_repetitions} repetitions, up to {n_runs} runs; \
+                 collide runs at most {MAX_CONFIGURATIONS} configurations and {MAX_RUNS} \
+                 runs in a study: sweep fewer values, lower `repetitions`, or split the study"
+            ),
         ));
     }
     let folder = at.path.parent().unwrap_or(Path::new("."));
@@ -347,7 +373,16 @@ fn configurations(
                     let base = per_worker_n(&input, &overrides).map_err(|message| {
                         at.invalid(offset, format!("scene `{scene}`: {message}"))
                     })?;
-                    overrides.n = Some(base * workers as i64);
+                    let n = base.checked_mul(workers as i64).ok_or_else(|| {
+                        at.invalid(
+                            offset,
+                            format!(
+                                "scene `{scene}`: weak scaling makes n = {base} × {workers} \
+                                 disks, beyond any count collide can hold; lower n"
+                            ),
+                        )
+                    })?;
+                    overrides.n = Some(n);
                 }
                 let footprint = checked(
                     at,
@@ -504,6 +539,26 @@ fn sweep_points(sweep: &SweepLists) -> Result<Vec<Overrides>, (usize, String)> {
     let (paired, free): (Vec<_>, Vec<_>) = lists
         .into_iter()
         .partition(|list| zipped.iter().any(|z| z == list.key));
+    // Counted before any point is made: a product of long lists would fill memory first.
+    let n_points = free
+        .iter()
+        .map(|list| list.len)
+        .chain(paired.first().map(|list| list.len))
+        .try_fold(1usize, usize::checked_mul)
+        .filter(|&n| n <= MAX_CONFIGURATIONS);
+    if n_points.is_none() {
+        let offset = free
+            .first()
+            .or(paired.first())
+            .map_or(0, |list| list.offset);
+        return Err((
+            offset,
+            format!(
+                "the sweep's lists multiply to more than {MAX_CONFIGURATIONS} points; sweep \
+                 fewer values, pair lists with `sweep.zip`, or split the study"
+            ),
+        ));
+    }
     let mut points = vec![Overrides::default()];
     if let Some(SweptList { len, .. }) = paired.first() {
         if let Some(SweptList { key, .. }) = paired.iter().find(|list| list.len != *len) {
@@ -549,6 +604,16 @@ fn scene_input(raw: &RawScene, folder: &Path) -> Result<(String, SceneInput), St
             let path = folder.join(file);
             let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
             let given = raw.name.as_ref().map(|name| name.get_ref().clone());
+            if given.is_none() {
+                // The name reaches reports and terminals as the inline names do.
+                let stem = stem.as_deref().unwrap_or_default();
+                check_name(stem).map_err(|reason| {
+                    format!(
+                        "the scene's name, taken from its file name, {reason}; rename the file \
+                         or give the entry a `name`"
+                    )
+                })?;
+            }
             let name = given.or(stem).unwrap_or_else(|| file.clone());
             Ok((name, SceneInput::File(path)))
         }

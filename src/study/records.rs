@@ -13,10 +13,10 @@ use polars::prelude::{
 use crate::run::backend_kind::BackendKind;
 use crate::run::summary::RunSummary;
 use crate::study::environment::Environment;
-use crate::study::manifest::Scaling;
+use crate::study::manifest::{PLACEMENT_KEYS, Scaling};
 use crate::system::output::write_atomically;
 
-pub const SCHEMA_VERSION: u32 = 8;
+pub const SCHEMA_VERSION: u32 = 10;
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
 const OLDEST_READABLE_VERSION: u32 = 1;
 
@@ -70,6 +70,14 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     (7, "fps_with_drawing", Fill::F64(f64::NAN)),
     // Version 7 ran one program per study, never an A/B check.
     (8, "ab_side", Fill::Str("")),
+    // Version 8 did not count what MPI ranks sent.
+    (9, "messages_per_step_max", Fill::F64(f64::NAN)),
+    (9, "messages_per_step_mean", Fill::F64(f64::NAN)),
+    (9, "bytes_per_step_max", Fill::F64(f64::NAN)),
+    (9, "bytes_per_step_mean", Fill::F64(f64::NAN)),
+    (9, "collectives_per_step", Fill::F64(f64::NAN)),
+    // Version 9 did not record the scene's contents, only its name.
+    (10, "scene_hash", Fill::Str("")),
 ];
 
 /// What became of one run.
@@ -85,6 +93,8 @@ pub struct RecordContext<'a> {
     pub build_id: &'a str,
     pub config_key: &'a str,
     pub scene: &'a str,
+    /// xxh3 of the scene file's text (see [`scene_hash`]).
+    pub scene_hash: &'a str,
     /// `strong` or `weak`.
     pub scaling: &'a str,
     pub backend: BackendKind,
@@ -122,6 +132,7 @@ impl Record {
             build_id: context.build_id.to_owned(),
             config_key: context.config_key.to_owned(),
             scene: context.scene.to_owned(),
+            scene_hash: context.scene_hash.to_owned(),
             scaling: context.scaling.to_owned(),
             repetition: context.repetition,
             status: status.to_owned(),
@@ -222,11 +233,50 @@ impl Unmeasured for Option<u64> {
 }
 
 impl Record {
-    /// The physical setup a run computed (scene, n, steps, dt, seed, packing, broad
-    /// phase, and the method when it is not the default step method), whatever the
-    /// backend: runs with the same setup must end in the same state.
+    /// The computation a run did, whatever placed it: its configuration key without the
+    /// backend and worker count, the scene's contents and the resolved n (which weak
+    /// scaling multiplies by the workers). Runs with the same setup must end in the same
+    /// state. Derived from the configuration key, so every override (each declared once
+    /// in [`crate::run::overrides`]) is part of it.
     pub fn setup_key(&self) -> String {
-        self.key_with_n(&format!("n={}", self.n))
+        self.computation_with(&format!("n={}", self.n))
+    }
+
+    /// The configuration key's entries but the placement and n, then `n` and the scene's
+    /// contents.
+    fn computation_with(&self, n: &str) -> String {
+        let mut entries: Vec<&str> = self
+            .config_key
+            .split(';')
+            .filter(|entry| !entry.starts_with("n="))
+            .filter(|entry| !PLACEMENT_KEYS.iter().any(|key| entry.starts_with(key)))
+            .collect();
+        let scene = format!("scene_hash={}", self.scene_hash);
+        entries.extend([n, &scene]);
+        entries.join(";")
+    }
+
+    /// The setup in words for tables: the scene, n, then every value the configuration
+    /// set.
+    pub fn setup_label(&self) -> String {
+        let mut words = vec![self.scene.clone(), format!("n={}", self.n)];
+        words.extend(self.settings(&[]));
+        words.join(" ")
+    }
+
+    /// The `NAME=VALUE` entries of the configuration's key that set a value, but the scene,
+    /// n, the placement and the names in `shown` elsewhere.
+    pub fn settings(&self, shown: &[&str]) -> Vec<String> {
+        self.config_key
+            .split(';')
+            .filter(|entry| !entry.ends_with("=-"))
+            .filter(|entry| !PLACEMENT_KEYS.iter().any(|key| entry.starts_with(key)))
+            .filter(|entry| {
+                let name = entry.split('=').next().unwrap_or_default();
+                !["scene", "n"].contains(&name) && !shown.contains(&name)
+            })
+            .map(str::to_owned)
+            .collect()
     }
 
     /// How the study scaled; anything but `weak` (older files have `strong`) is strong.
@@ -239,16 +289,14 @@ impl Record {
     }
 
     /// The runs one scaling curve compares: the setup, except that in a weak-scaling
-    /// study n grows with the workers, so the curve is keyed by n per worker. Runs that
-    /// drew every step are a curve of their own: each frame evicts their disks from the
-    /// caches, so even their stepping is slower.
+    /// study n grows with the workers, so the curve is keyed by n per worker.
     pub fn series_key(&self) -> String {
-        let key = if self.scaling() == Scaling::Weak {
-            self.key_with_n(&format!("weak n/worker={}", self.n / self.workers.max(1)))
-        } else {
-            self.setup_key()
-        };
-        if self.drew() { key + " drawn" } else { key }
+        match self.scaling() {
+            Scaling::Weak => {
+                self.computation_with(&format!("n/worker={}", self.n / self.workers.max(1)))
+            }
+            Scaling::Strong => self.setup_key(),
+        }
     }
 
     /// Whether the run drew every step offscreen (`draw = true`).
@@ -256,22 +304,53 @@ impl Record {
         self.draw_s.is_finite()
     }
 
-    fn key_with_n(&self, n: &str) -> String {
-        let method = match self.method.as_str() {
-            "" | "step" => String::new(),
-            other => format!(" method={other}"),
-        };
+    /// One run's identity: which repetition of which configuration of which study, on
+    /// which host, in which sitting of the study, by which build and side. Rows with the
+    /// same run id are copies of one run (a backup of a results file, rows a resumed study
+    /// carried).
+    pub fn run_id(&self) -> String {
         format!(
-            "{} {n} steps={} dt={} seed={} packing={:.4} broadphase={}{method}",
-            self.scene,
-            self.steps,
-            self.dt,
-            self.seed
-                .map_or_else(|| "none".to_owned(), |s| s.to_string()),
-            self.packing,
-            self.broadphase
+            "{}|{}|{}|{}|{}|{}|{}|{}",
+            self.study,
+            self.hostname,
+            self.study_started_utc,
+            self.build_id,
+            self.config_key,
+            self.scene_hash,
+            self.ab_side,
+            self.repetition
         )
     }
+
+    /// The first value in row `index` that no run can measure (named with its field),
+    /// if any: a successful run's negative or non-numeric time, no workers.
+    fn impossible(&self, index: usize) -> Option<String> {
+        let at = |field: &str, value: String| Some(format!("row {index}: `{field}` = {value}"));
+        if self.workers == 0 || self.threads == 0 || self.ranks == 0 {
+            return at("workers", self.workers.to_string());
+        }
+        if self.status != STATUS_OK {
+            return None;
+        }
+        // (`cpu_s` less the drawing's CPU time may come out a little below zero.)
+        match self.wall_s.is_finite() && self.wall_s >= 0.0 {
+            true => None,
+            false => at("wall_s", self.wall_s.to_string()),
+        }
+    }
+}
+
+/// `records` with every copy of a run after its first left out (by [`Record::run_id`]),
+/// and how many were left out.
+pub fn without_copies(records: Vec<Record>) -> (Vec<Record>, usize) {
+    let mut seen = std::collections::BTreeSet::new();
+    let total = records.len();
+    let unique: Vec<Record> = records
+        .into_iter()
+        .filter(|record| seen.insert(record.run_id()))
+        .collect();
+    let copies = total - unique.len();
+    (unique, copies)
 }
 
 /// The current UTC time, RFC 3339 to the second.
@@ -315,7 +394,7 @@ macro_rules! for_each_column {
                  boundary <- run, broadphase <- run, state_hash <- run, hostname, cpu_model, os,
                  rustc, profile, features, git_commit, mpi_library, study_started_utc,
                  finished_utc, method <- run, observe <- run, choice <- run,
-                 temperature_curve <- run, cpu_affinity, ab_side;
+                 temperature_curve <- run, cpu_affinity, ab_side, scene_hash;
             u64: threads <- run, ranks <- run, workers <- run, n <- run, steps <- run,
                  pair_collisions <- run, wall_collisions <- run, logical_cores, physical_cores,
                  memory_bytes;
@@ -323,6 +402,9 @@ macro_rules! for_each_column {
             f64: dt <- run, packing <- run, wall_s <- run, cpu_s <- run, setup_s <- run,
                  fps <- run, draw_s <- run, fps_with_drawing <- run, particle_steps_per_s <- run, integration_s <- run,
                  broad_phase_s <- run, collision_s <- run, communication_s <- run,
+                 messages_per_step_max <- run, messages_per_step_mean <- run,
+                 bytes_per_step_max <- run, bytes_per_step_mean <- run,
+                 collectives_per_step <- run,
                  kinetic_energy_initial <- run, kinetic_energy_final <- run, momentum_initial_x,
                  momentum_initial_y, momentum_final_x, momentum_final_y, max_overlap <- run,
                  max_wall_penetration <- run, load_average_start, load_average,
@@ -516,11 +598,18 @@ pub fn files_in(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
 /// Reads the records of one results file, saying which file and why if it cannot. A
 /// file without rows (a study stopped before its first run ended) reads as no records.
 pub fn read(path: &Path) -> anyhow::Result<Vec<Record>> {
+    // Opening a FIFO would wait for a writer forever: look before opening.
+    let meta =
+        std::fs::metadata(path).with_context(|| format!("cannot read {}", path.display()))?;
+    if !meta.is_file() {
+        bail!(
+            "{} is a {}, not a results file; move it out of the results folder",
+            path.display(),
+            crate::system::input::kind_of(&meta)
+        );
+    }
     let file = File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
-    let bytes = file
-        .metadata()
-        .with_context(|| format!("cannot read {}", path.display()))?
-        .len();
+    let bytes = meta.len();
     if bytes == 0 {
         bail!(
             "{} is empty (0 bytes), not a results file; delete it (a study that was \
@@ -534,7 +623,19 @@ pub fn read(path: &Path) -> anyhow::Result<Vec<Record>> {
             path.display()
         )
     })?;
-    from_frame(&frame).with_context(|| format!("{}", path.display()))
+    let records = from_frame(&frame).with_context(|| format!("{}", path.display()))?;
+    if let Some(problem) = records
+        .iter()
+        .enumerate()
+        .find_map(|(i, r)| r.impossible(i))
+    {
+        bail!(
+            "{}: {problem}, which no run can measure: the file was edited or damaged; restore \
+             it, or move it out of the results folder",
+            path.display()
+        );
+    }
+    Ok(records)
 }
 
 /// A serial run's context for unit tests: one worker, repetition 0, placeholder names.
@@ -546,6 +647,7 @@ pub(crate) fn serial_context(environment: &Environment) -> RecordContext<'_> {
         build_id: "b",
         config_key: "k",
         scene: "gas",
+        scene_hash: "0123456789abcdef",
         scaling: "strong",
         backend: BackendKind::Serial,
         workers: 1,

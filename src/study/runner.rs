@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use anyhow::{Context, bail};
+use anyhow::{Context, anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::run::backend_kind::BackendKind;
@@ -25,6 +25,7 @@ use crate::study::manifest::{Configuration, SceneInput, Study};
 use crate::study::records::{
     self, Record, RecordContext, STATUS_FAILED, STATUS_OK, STATUS_TIMED_OUT,
 };
+use crate::system::input::{MAX_TEXT_BYTES, read_text};
 use crate::system::output::{free_path, remove_leftovers, write_atomically};
 use crate::system::process::{Ended, interrupt_note, run_with_timeout, tail};
 
@@ -33,8 +34,11 @@ use crate::system::process::{Ended, interrupt_note, run_with_timeout, tail};
 pub struct RunOptions {
     /// Results root: the study writes into `out/<study name>/`.
     pub out: PathBuf,
-    /// Continue the newest results file of the same manifest and build.
+    /// Continue the newest results file of the same build: its rows of the runs still
+    /// wanted are kept, the rest are measured.
     pub resume: bool,
+    /// The command an interrupt suggests to continue (e.g. [`resume_command`]).
+    pub continue_with: String,
     /// No progress bar or notes (also when stdout is not a terminal).
     pub quiet: bool,
     /// The programs that run every repetition, one after the other: this one alone in
@@ -135,7 +139,7 @@ pub fn run_study(
     let quiet = options.quiet || !std::io::stdout().is_terminal();
     let note = |text: &str| {
         if !quiet {
-            println!("{text}");
+            crate::outln!("{text}");
         }
     };
     let configurations = runnable(study)?;
@@ -144,23 +148,27 @@ pub fn run_study(
     let _held = open_results_folder(&dir, &note)?;
     let manifest_hash = manifest_hash(manifest_text);
     let build_id = build_id(&environment);
-    let (results, mut rows) = kept_or_new(
-        &dir,
-        options.resume,
-        &manifest_hash,
-        &build_id,
-        &environment,
-    )?;
-    let continue_with = resume_command(&study.manifest, &options.out);
-    let kept_note = |rows: &[Record]| interrupted_note(rows, &results, &continue_with);
+    let scene_hashes = configurations
+        .iter()
+        .map(|configuration| scene_hash(&configuration.input))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let wanted: Vec<RunIdentity> = (0..study.rounds())
+        .flat_map(|rep| (0..configurations.len()).map(move |c| (rep, c)))
+        .filter(|&(rep, c)| rep < configurations[c].repetitions)
+        .map(|(rep, c)| RunIdentity {
+            config_key: configurations[c].key(),
+            scene_hash: scene_hashes[c].clone(),
+            repetition: rep,
+        })
+        .collect();
+    let (results, mut rows) = match options.resume {
+        false => (new_results_path(&dir, &environment), Vec::new()),
+        true => resumed(&dir, &build_id, &wanted, &environment, &note)?,
+    };
+    let kept_note = |rows: &[Record]| interrupted_note(rows, &results, &options.continue_with);
     *interrupt_note() = kept_note(&rows);
     let kept = rows.len();
-    let done: BTreeSet<(String, u32)> = rows
-        .iter()
-        .filter(|r| r.status == STATUS_OK)
-        .map(|r| (r.config_key.clone(), r.repetition))
-        .collect();
-    rows.retain(|r| r.status == STATUS_OK);
+    let done: BTreeSet<RunIdentity> = rows.iter().map(RunIdentity::of).collect();
     let kept_ok = rows.len();
 
     note_configurations(&configurations, &environment, &note);
@@ -168,7 +176,13 @@ pub fn run_study(
     let todo: Vec<(u32, usize)> = (0..study.rounds())
         .flat_map(|rep| (0..configurations.len()).map(move |c| (rep, c)))
         .filter(|&(rep, c)| rep < configurations[c].repetitions)
-        .filter(|&(rep, c)| !done.contains(&(configurations[c].key(), rep)))
+        .filter(|&(rep, c)| {
+            !done.contains(&RunIdentity {
+                config_key: configurations[c].key(),
+                scene_hash: scene_hashes[c].clone(),
+                repetition: rep,
+            })
+        })
         .collect();
     let warm: BTreeSet<usize> = todo.iter().map(|&(_, c)| c).collect();
     let n_programs = options.programs.len();
@@ -220,6 +234,7 @@ pub fn run_study(
             build_id: &build_id,
             config_key: &key,
             scene: &configuration.scene,
+            scene_hash: &scene_hashes[c],
             scaling: study.scaling.name(),
             backend: configuration.backend,
             workers: configuration.workers as u64,
@@ -256,26 +271,68 @@ pub fn run_study(
     })
 }
 
-/// The results file of a study and the rows it already holds: with `resume`, the file
-/// of this manifest and build in `dir` (an error if there is none); otherwise a new,
-/// unique file and no rows.
-fn kept_or_new(
+/// What makes two runs the same measurement: the configuration (its key), the scene's
+/// contents, and the repetition. `--resume` reuses a row only when all three match.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
+struct RunIdentity {
+    config_key: String,
+    scene_hash: String,
+    repetition: u32,
+}
+
+impl RunIdentity {
+    fn of(record: &Record) -> RunIdentity {
+        RunIdentity {
+            config_key: record.config_key.clone(),
+            scene_hash: record.scene_hash.clone(),
+            repetition: record.repetition,
+        }
+    }
+}
+
+/// The results file a resumed study writes and the rows it reuses: the successful rows of
+/// the last file of this build in `dir` that match a run still `wanted`. When that file
+/// holds nothing else, the study continues in it; when it also holds rows of runs no
+/// longer wanted (a scene or a sweep was edited since), those stay where they are and the
+/// study continues in a new file that starts with the reused rows. An error when no
+/// file of this build exists.
+fn resumed(
     dir: &Path,
-    resume: bool,
-    manifest_hash: &str,
     build_id: &str,
+    wanted: &[RunIdentity],
     environment: &Environment,
+    note: &dyn Fn(&str),
 ) -> anyhow::Result<(PathBuf, Vec<Record>)> {
-    if !resume {
-        return Ok((new_results_path(dir, environment), Vec::new()));
-    }
-    match resumable(dir, manifest_hash, build_id)? {
-        Some(found) => Ok(found),
-        None => bail!(
-            "nothing to resume in {}: no results file of this manifest and build; run without --resume",
+    let Some((path, rows)) = resumable(dir, build_id)? else {
+        bail!(
+            "nothing to resume in {}: no results file of this build; run without --resume",
             dir.display()
-        ),
+        );
+    };
+    let wanted: BTreeSet<&RunIdentity> = wanted.iter().collect();
+    let total = rows.len();
+    // A row of a run no longer wanted (a scene or sweep edited since) is never dropped.
+    let stale = rows
+        .iter()
+        .any(|row| !wanted.contains(&RunIdentity::of(row)));
+    let mut seen = BTreeSet::new();
+    let reused: Vec<Record> = rows
+        .into_iter()
+        .filter(|row| row.status == STATUS_OK && seen.insert(RunIdentity::of(row)))
+        .filter(|row| wanted.contains(&RunIdentity::of(row)))
+        .collect();
+    if !stale {
+        return Ok((path, reused));
     }
+    let fresh = new_results_path(dir, environment);
+    note(&format!(
+        "resuming: {} of the {total} rows of {} match this manifest and its scenes; the others \
+         ran a workload since changed and stay in that file; continuing in {}",
+        reused.len(),
+        path.display(),
+        fresh.display()
+    ));
+    Ok((fresh, reused))
 }
 
 /// What an interrupt prints: the measured runs kept in `results` and the command that
@@ -586,7 +643,7 @@ fn hold_folder(dir: &Path) -> anyhow::Result<File> {
 }
 
 /// The command that continues a study: `collide run MANIFEST [--out OUT] --resume`.
-fn resume_command(manifest: &Path, out: &Path) -> String {
+pub fn resume_command(manifest: &Path, out: &Path) -> String {
     let word = |path: &Path| {
         let text = path.display().to_string();
         if text
@@ -632,13 +689,9 @@ fn new_results_path(dir: &Path, environment: &Environment) -> PathBuf {
     )
 }
 
-/// The results file in `dir` last written by the same manifest and build, with its rows;
-/// files that cannot be read are passed over with a warning naming them.
-fn resumable(
-    dir: &Path,
-    manifest_hash: &str,
-    build_id: &str,
-) -> anyhow::Result<Option<(PathBuf, Vec<Record>)>> {
+/// The results file in `dir` last written by the same build, with its rows; files that
+/// cannot be read are passed over with a warning naming them.
+fn resumable(dir: &Path, build_id: &str) -> anyhow::Result<Option<(PathBuf, Vec<Record>)>> {
     let mut files = records::files_in(dir)?;
     // Last written first; names (oldest first) break ties, e.g. two studies in one second.
     let modified = |path: &PathBuf| std::fs::metadata(path).and_then(|m| m.modified()).ok();
@@ -651,18 +704,27 @@ fn resumable(
                 continue;
             }
         };
-        if rows
-            .first()
-            .is_some_and(|r| r.manifest_hash == manifest_hash && r.build_id == build_id)
-        {
+        if rows.first().is_some_and(|r| r.build_id == build_id) {
             return Ok(Some((path, rows)));
         }
     }
     Ok(None)
 }
 
+/// xxh3 of the scene's text: the file's as it is now, or the inline scene's.
+fn scene_hash(input: &SceneInput) -> anyhow::Result<String> {
+    let text = match input {
+        SceneInput::File(path) => read_text(path, MAX_TEXT_BYTES)
+            .map_err(|reason| anyhow!("cannot read scene file {}: {reason}", path.display()))?,
+        SceneInput::Inline(text) => text.clone(),
+    };
+    Ok(manifest_hash(&text))
+}
+
 /// The scene file each configuration's process reads: its own file, or its inline scene
-/// written to `<dir>/scenes/<scene>.toml` (kept beside the results it produced).
+/// written to `<dir>/scenes/<scene>-<scene_hash>.toml`, kept beside the results it
+/// produced. The name holds the contents' hash, so a copy that rows refer to is never
+/// replaced by another manifest's scene of the same name.
 pub fn materialize_scenes(
     dir: &Path,
     configurations: &[&Configuration],
@@ -675,8 +737,11 @@ pub fn materialize_scenes(
             SceneInput::Inline(text) => {
                 std::fs::create_dir_all(&scenes)
                     .with_context(|| format!("cannot create {}", scenes.display()))?;
-                let path = scenes.join(format!("{}.toml", configuration.scene));
-                write_atomically(&path, |out| out.write_all(text.as_bytes()))?;
+                let hash = scene_hash(&configuration.input)?;
+                let path = scenes.join(format!("{}-{hash}.toml", configuration.scene));
+                if !path.exists() {
+                    write_atomically(&path, |out| out.write_all(text.as_bytes()))?;
+                }
                 Ok(path)
             }
         })

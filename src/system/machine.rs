@@ -57,12 +57,14 @@ pub const USABLE_CPUS_ENV: &str = "COLLIDE_USABLE_CPUS";
 /// The CPUs this process may run on: its affinity mask and CPU quota (`taskset`, a
 /// batch scheduler's cpuset, a container's limit), as the standard library counts them.
 /// Worker defaults and the oversubscription verdict follow it. An MPI rank takes the
-/// count of the process that launched the ranks, from [`USABLE_CPUS_ENV`].
+/// count of the process that launched the ranks, from [`USABLE_CPUS_ENV`], never more
+/// than the machine's CPUs (a variable set by hand cannot hide oversubscription).
 pub fn usable_cpus() -> usize {
     std::env::var(USABLE_CPUS_ENV)
         .ok()
-        .and_then(|count| count.parse().ok())
+        .and_then(|count| count.parse::<usize>().ok())
         .filter(|&count| count > 0)
+        .map(|count| count.min(machine_cores()))
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, NonZeroUsize::get))
 }
 

@@ -4,8 +4,9 @@
 //! such), PNG and GIF pictures encoded from memory, and the CSV state dump.
 
 use std::io::{BufWriter, ErrorKind, Write};
-use std::os::unix::fs::PermissionsExt;
+use std::os::unix::fs::{FileTypeExt, MetadataExt, PermissionsExt};
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard, PoisonError};
 
 use anyhow::{Context, anyhow, bail};
 use plotters::coord::Shift;
@@ -34,15 +35,19 @@ pub fn free_path(dir: &Path, base: &str, ext: &str) -> PathBuf {
 }
 
 /// Writes a file through a temporary sibling and renames it into place, so readers
-/// never see a half-written file and a failure leaves any earlier file untouched.
+/// never see a half-written file and a failure leaves any earlier file untouched. Only a
+/// regular file is ever replaced: a symbolic link is followed and its target replaced; a
+/// character device or a FIFO (`/dev/null`, a named pipe) is written through; anything
+/// else is refused (see [`Destination`]).
 pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> anyhow::Result<()> {
-    let dir = match path.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent,
-        _ => Path::new("."),
+    let target = match Destination::of(path)? {
+        Destination::File(target) => target,
+        Destination::Stream => return write_through(path, write),
     };
+    let dir = folder_of(&target);
     let temp = tempfile::Builder::new()
         .prefix(TEMP_PREFIX)
         .suffix(TEMP_SUFFIX)
@@ -57,6 +62,7 @@ pub fn write_atomically(
                 dir,
             )
         })?;
+    let _removed_if_interrupted = InFlight::register(temp.path());
     {
         let mut writer = BufWriter::new(temp.as_file());
         write(&mut writer).and_then(|()| writer.flush())
@@ -66,7 +72,7 @@ pub fn write_atomically(
     temp.as_file()
         .set_permissions(std::fs::Permissions::from_mode(0o644))
         .with_context(|| format!("cannot make {} readable", path.display()))?;
-    temp.persist(path).map_err(|err| {
+    temp.persist(&target).map_err(|err| {
         described(
             err.error,
             format!("cannot move the finished file to {}", path.display()),
@@ -74,6 +80,133 @@ pub fn write_atomically(
         )
     })?;
     Ok(())
+}
+
+/// Writes into an existing device or FIFO as it is: no temporary file, no rename.
+fn write_through(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> anyhow::Result<()> {
+    let stream = std::fs::OpenOptions::new()
+        .write(true)
+        .open(path)
+        .with_context(|| format!("cannot open {} for writing", path.display()))?;
+    let mut writer = BufWriter::new(stream);
+    write(&mut writer)
+        .and_then(|()| writer.flush())
+        .map_err(|err| match err.kind() {
+            ErrorKind::StorageFull | ErrorKind::QuotaExceeded => anyhow!(
+                "cannot write {}: it is full (no space left on the device); write to another \
+                 path",
+                path.display()
+            ),
+            _ => anyhow::Error::new(err).context(format!("cannot write {}", path.display())),
+        })
+}
+
+/// The folder a file lies in (`.` for a bare file name).
+fn folder_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => parent,
+        _ => Path::new("."),
+    }
+}
+
+/// Where writing to an output path leads, once symbolic links are followed.
+#[derive(Debug, PartialEq, Eq)]
+enum Destination {
+    /// A regular file, existing or not, at this path (the link's target for a link):
+    /// replaced atomically.
+    File(PathBuf),
+    /// An existing character device or FIFO: written through, never replaced.
+    Stream,
+}
+
+/// Links followed before a chain of them is taken for a loop (Linux's own limit).
+const MAX_LINKS: usize = 40;
+
+impl Destination {
+    fn of(path: &Path) -> anyhow::Result<Destination> {
+        let target = follow_links(path)?;
+        let Ok(meta) = std::fs::metadata(&target) else {
+            return Ok(Destination::File(target));
+        };
+        let kind = meta.file_type();
+        if kind.is_file() {
+            Ok(Destination::File(target))
+        } else if kind.is_char_device() || kind.is_fifo() {
+            Ok(Destination::Stream)
+        } else if kind.is_dir() {
+            bail!(
+                "{} is a folder; give a file name, e.g. {}",
+                path.display(),
+                path.join("out").display()
+            )
+        } else {
+            bail!(
+                "{} is a {}, not a regular file; collide writes only regular files, character \
+                 devices and named pipes: choose another path",
+                path.display(),
+                if kind.is_block_device() {
+                    "block device"
+                } else {
+                    "socket"
+                }
+            )
+        }
+    }
+}
+
+/// `path` with every symbolic link along its last component followed (a dangling link
+/// leads to the file it names, which writing creates).
+fn follow_links(path: &Path) -> anyhow::Result<PathBuf> {
+    let mut current = path.to_path_buf();
+    for _ in 0..MAX_LINKS {
+        match std::fs::symlink_metadata(&current) {
+            Ok(meta) if meta.file_type().is_symlink() => {
+                let target = std::fs::read_link(&current)
+                    .with_context(|| format!("cannot read the link {}", current.display()))?;
+                current = folder_of(&current).join(target);
+            }
+            _ => return Ok(current),
+        }
+    }
+    bail!(
+        "{}: more than {MAX_LINKS} symbolic links in a row (a loop?); give the file's own path",
+        path.display()
+    )
+}
+
+/// Temporary files being written now: an interrupt removes them before exiting
+/// ([`remove_in_flight`]), so an interrupted writer leaves nothing behind.
+static IN_FLIGHT: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// A temporary file registered in [`IN_FLIGHT`] for as long as this guard lives.
+struct InFlight(PathBuf);
+
+impl InFlight {
+    fn register(path: &Path) -> InFlight {
+        in_flight().push(path.to_path_buf());
+        InFlight(path.to_path_buf())
+    }
+}
+
+impl Drop for InFlight {
+    fn drop(&mut self) {
+        in_flight().retain(|path| *path != self.0);
+    }
+}
+
+fn in_flight() -> MutexGuard<'static, Vec<PathBuf>> {
+    IN_FLIGHT.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Removes the temporary files of writes still in progress; for the interrupt handler,
+/// just before the process exits.
+pub fn remove_in_flight() {
+    for path in in_flight().drain(..) {
+        let _ = std::fs::remove_file(path);
+    }
 }
 
 /// Removes the temporary files that writers killed before their rename left in `dir`
@@ -96,23 +229,24 @@ pub fn remove_leftovers(dir: &Path) -> anyhow::Result<usize> {
     Ok(removed)
 }
 
-/// Checks, before any work, that a file can be written at `path`: its folder exists and
-/// is a folder, and `path` is not a folder. `flag` names where the path came from.
+/// Checks, before any work, that a file can be written at `path`: it is not a folder
+/// nor a kind of file collide never writes (see [`Destination`]), and the folder its
+/// file (a link's target) goes in exists and may be written in. `flag` names where the
+/// path came from.
 pub fn check_output_file(path: &Path, flag: &str) -> anyhow::Result<()> {
-    if path.is_dir() {
-        bail!(
-            "{flag} {} is a folder; give a file name, e.g. {}",
-            path.display(),
-            path.join("out").display()
-        );
-    }
-    let dir = match path.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent,
-        _ => Path::new("."),
+    let target = match Destination::of(path).map_err(|err| anyhow!("{flag} {err:#}"))? {
+        Destination::File(target) => target,
+        Destination::Stream => return Ok(()),
     };
+    let dir = folder_of(&target);
     if let Err(err) = std::fs::metadata(dir) {
+        let through = match target == path {
+            true => String::new(),
+            false => format!(" (the link leads to {})", target.display()),
+        };
         bail!(
-            "{flag} {}: cannot use the folder {} ({}); create it first or choose another path",
+            "{flag} {}{through}: cannot use the folder {} ({}); create it first or choose \
+             another path",
             path.display(),
             dir.display(),
             io_reason(&err)
@@ -124,6 +258,65 @@ pub fn check_output_file(path: &Path, flag: &str) -> anyhow::Result<()> {
         flag,
         "choose a path in a folder you may write in",
     )
+}
+
+/// Who a path is, to tell whether two paths name one file: the device and inode of an
+/// existing file, or the absolute path a new file would get.
+#[derive(Debug, PartialEq, Eq)]
+enum Identity {
+    Existing { device: u64, inode: u64 },
+    New(PathBuf),
+}
+
+impl Identity {
+    fn of(path: &Path) -> Identity {
+        match std::fs::metadata(path) {
+            Ok(meta) => Identity::Existing {
+                device: meta.dev(),
+                inode: meta.ino(),
+            },
+            Err(_) => {
+                let target = follow_links(path).unwrap_or_else(|_| path.to_path_buf());
+                let dir = std::fs::canonicalize(folder_of(&target))
+                    .unwrap_or_else(|_| folder_of(&target).to_path_buf());
+                Identity::New(dir.join(target.file_name().unwrap_or_default()))
+            }
+        }
+    }
+}
+
+/// Refuses, before any work, an output that is one of the command's inputs or another of
+/// its outputs (by the file they name, links followed): writing it would destroy the
+/// input, or one output would silently take the other's place. Character devices
+/// (`/dev/null`) may take several outputs. Each path comes with the flag or argument
+/// that gave it.
+pub fn check_distinct(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> anyhow::Result<()> {
+    let is_device =
+        |path: &Path| std::fs::metadata(path).is_ok_and(|meta| meta.file_type().is_char_device());
+    for (index, &(flag, path)) in outputs.iter().enumerate() {
+        if is_device(path) {
+            continue;
+        }
+        let identity = Identity::of(path);
+        if let Some((input, _)) = inputs.iter().find(|(_, p)| Identity::of(p) == identity) {
+            bail!(
+                "{flag} {} is the {input} itself: writing it would destroy the input; choose \
+                 another path",
+                path.display()
+            );
+        }
+        if let Some((other, _)) = outputs[..index]
+            .iter()
+            .find(|(_, p)| Identity::of(p) == identity)
+        {
+            bail!(
+                "{flag} {} is the same file as {other}: one would replace the other; give each \
+                 output its own path",
+                path.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Checks that `dir`, which exists, is a folder this process may write into; the error
@@ -166,8 +359,18 @@ pub fn check_output_folder(dir: &Path, flag: &str) -> anyhow::Result<()> {
             true => Path::new("."),
             false => part,
         })
-        .find(|part| part.exists())
+        .find(|part| part.symlink_metadata().is_ok())
         .unwrap_or(Path::new("."));
+    if !existing.exists() {
+        let target = std::fs::read_link(existing).unwrap_or_default();
+        bail!(
+            "{flag} {}: {} is a link to {}, which does not exist; create that folder first, \
+             or choose another folder",
+            dir.display(),
+            existing.display(),
+            target.display()
+        );
+    }
     check_writable_folder(existing, dir, flag, "choose another folder")
 }
 

@@ -5,7 +5,7 @@
 //! killer) leaves no orphan.
 
 use std::collections::BTreeSet;
-use std::io::Read;
+use std::io::{Read, Write};
 use std::os::unix::process::CommandExt;
 use std::process::{Command, ExitStatus, Stdio};
 use std::sync::{Mutex, MutexGuard, PoisonError};
@@ -49,7 +49,8 @@ pub fn interrupt_note() -> MutexGuard<'static, Option<String>> {
 
 /// On Ctrl-C or SIGTERM, waits for any write of results to finish, interrupts every
 /// running child's group (a child that launched MPI ranks stops them in turn), prints
-/// the [`interrupt_note`], then exits with code 130 ([`crate::exit::INTERRUPTED`]).
+/// the [`interrupt_note`], removes the temporary files of unfinished writes, then exits
+/// with code 130 ([`crate::exit::INTERRUPTED`]).
 /// Call once, early.
 pub fn stop_children_on_interrupt() {
     let installed = ctrlc::set_handler(|| {
@@ -60,7 +61,13 @@ pub fn stop_children_on_interrupt() {
         for group in groups {
             signal_group(group, Signal::INT);
         }
-        eprintln!("{}", note.as_deref().unwrap_or(NOTHING_KEPT));
+        crate::system::output::remove_in_flight();
+        // Not eprintln!, which panics (and so never exits) when stderr's reader is gone.
+        let _ = writeln!(
+            std::io::stderr(),
+            "{}",
+            note.as_deref().unwrap_or(NOTHING_KEPT)
+        );
         std::process::exit(i32::from(crate::exit::INTERRUPTED.code));
     });
     // A second call in the same process fails; the first handler stays, which is right.

@@ -433,7 +433,7 @@ fn apply_keys(
                     .clone()
                     .unwrap_or_else(|| PathBuf::from(format!("collide-view-{screenshots}.png")));
                 match write_png(&path, frame) {
-                    Ok(()) => println!("screenshot written to {}", path.display()),
+                    Ok(()) => crate::outln!("screenshot written to {}", path.display()),
                     Err(err) => eprintln!("error: {err:#}"),
                 }
             }
