@@ -334,13 +334,13 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let backend = backend_spec(args, &machine)?;
     check_outputs(&args.scene, &[("--dump", &args.dump)])?;
     let mut spec = scene_file::load(&args.scene, &args.overrides)?;
-    // Every rank of an MPI run builds all the disks.
-    let copies = match backend {
-        BackendSpec::Mpi { ranks } => ranks.map_or_else(usable_cpus, NonZeroUsize::get),
-        BackendSpec::Serial | BackendSpec::Rayon { .. } => 1,
+    let capabilities = args.backend.capabilities();
+    let copies = match (capabilities.scene_in_every_process, backend) {
+        (true, BackendSpec::Mpi { ranks }) => ranks.map_or_else(usable_cpus, NonZeroUsize::get),
+        _ => 1,
     };
     check_fits(&args.scene, &spec, copies, &machine)?;
-    if spec.method.method.may_be_event() && backend != BackendSpec::Serial {
+    if spec.method.method.may_be_event() && !capabilities.event_method {
         bail!(
             "{}: the event method (which method auto may choose) runs on the serial backend \
              only; drop --backend {} (and --threads/--ranks), or use --method step",
@@ -348,7 +348,7 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
             args.backend.name()
         );
     }
-    if spec.method.draw && matches!(backend, BackendSpec::Mpi { .. }) {
+    if spec.method.draw && !capabilities.draws {
         bail!(
             "{}: --draw draws every step, which needs all the disks in one process; drop \
              --backend mpi (and --ranks) for serial or rayon, or drop --draw",

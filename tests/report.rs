@@ -133,7 +133,8 @@ fn study_records(scaling: &str) -> Vec<Record> {
                 environment: &environment,
                 study_started_utc: "2026-11-22T12:00:00Z",
             };
-            let (threads, ranks) = backend.split(workers);
+            let placement = backend.placement(workers);
+            let (threads, ranks) = (placement.threads, placement.ranks);
             // Weak scaling: p workers do p times the work of one.
             let work = if scaling == "weak" { workers } else { 1 };
             let wall_s = times[repetition as usize] * work as f64;

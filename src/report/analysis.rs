@@ -187,13 +187,20 @@ fn keyed_frame(records: &[Record], series_keys: &[String]) -> PolarsResult<DataF
     Ok(frame)
 }
 
-/// Median, min and max time, repetitions and median FPS per (series, backend, workers),
+/// Median, min and max time, repetitions and median FPS per (series, backend, placement),
 /// in first-seen order: (series, backend, point without its derived ratios).
 fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Point)>> {
     let table = frame
         .clone()
         .lazy()
-        .group_by_stable([col("series"), col("backend"), col("workers")])
+        // By placement, not only the worker count: 2 ranks × 2 threads is not 4 × 1.
+        .group_by_stable([
+            col("series"),
+            col("backend"),
+            col("workers"),
+            col("ranks"),
+            col("threads"),
+        ])
         .agg([
             col("wall_s").median().alias("median_s"),
             col("wall_s").min().alias("min_s"),

@@ -279,10 +279,11 @@ pub fn table(records: &[Record]) -> String {
     for record in records {
         // What was computed, where, and by which side of an A/B check: never pooled across.
         let key = format!(
-            "{}|{}|{}|{}",
+            "{}|{}|{}x{}|{}",
             record.setup_key(),
             record.backend,
-            record.workers,
+            record.ranks,
+            record.threads,
             record.ab_side
         );
         let group = groups.entry(key.clone()).or_default();

@@ -1,7 +1,8 @@
 //! The backends a run can ask for, by kind: their names (on the command line, in
-//! manifests, in the JSON summary and the records) and how a run's workers split into
-//! threads and MPI ranks. Declared here once; every layer derives its strings and its
-//! thread and rank counts from it.
+//! manifests, in the JSON summary and the records), what each can run and needs
+//! ([`Capabilities`]), and where a run's workers go ([`Placement`]: ranks × threads).
+//! Declared here once; every layer derives its strings, its checks and its thread and
+//! rank counts from it.
 
 use clap::ValueEnum;
 
@@ -36,13 +37,48 @@ impl BackendKind {
             .find(|kind| kind.name() == name)
     }
 
-    /// How `workers` split into (threads per process, processes).
-    pub fn split(self, workers: usize) -> (usize, usize) {
+    /// Where `workers` go on this backend: each backend today puts them on one axis.
+    pub fn placement(self, workers: usize) -> Placement {
         match self {
-            BackendKind::Serial => (1, 1),
-            BackendKind::Rayon => (workers, 1),
-            BackendKind::Mpi => (1, workers),
+            BackendKind::Serial => Placement::SERIAL,
+            BackendKind::Rayon => Placement {
+                ranks: 1,
+                threads: workers,
+            },
+            BackendKind::Mpi => Placement {
+                ranks: workers,
+                threads: 1,
+            },
         }
+    }
+
+    /// What this backend can run and what it needs.
+    pub fn capabilities(self) -> Capabilities {
+        match self {
+            BackendKind::Serial => Capabilities {
+                event_method: true,
+                draws: true,
+                scene_in_every_process: false,
+                mpi: false,
+            },
+            BackendKind::Rayon => Capabilities {
+                event_method: false,
+                draws: true,
+                scene_in_every_process: false,
+                mpi: false,
+            },
+            BackendKind::Mpi => Capabilities {
+                event_method: false,
+                draws: false,
+                scene_in_every_process: true,
+                mpi: true,
+            },
+        }
+    }
+
+    /// Whether its runs are parallel: more than one worker is possible.
+    pub fn is_parallel(self) -> bool {
+        self.workers_flag().is_some()
     }
 
     /// The `collide simulate` flag that sets the worker count (serial has none).
@@ -61,19 +97,58 @@ impl BackendKind {
     }
 }
 
+/// What a backend can run and what it needs: the questions every layer asks of a kind,
+/// answered once per kind in [`BackendKind::capabilities`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Capabilities {
+    /// Runs the event method, which steps in one thread of one process.
+    pub event_method: bool,
+    /// Holds every disk in one process, so it can draw every step (`draw`).
+    pub draws: bool,
+    /// Every process places and holds the whole scene: its memory counts once per process.
+    pub scene_in_every_process: bool,
+    /// Its processes are started by an MPI launcher: it needs the `mpi` cargo feature.
+    pub mpi: bool,
+}
+
+/// Where a run's work goes: `ranks` processes, each stepping on `threads` threads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Placement {
+    pub ranks: usize,
+    pub threads: usize,
+}
+
+impl Placement {
+    /// One process of one thread.
+    pub const SERIAL: Placement = Placement {
+        ranks: 1,
+        threads: 1,
+    };
+
+    /// The workers a scaling curve counts: ranks × threads.
+    pub fn workers(self) -> usize {
+        self.ranks * self.threads
+    }
+}
+
+impl std::fmt::Display for Placement {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} rank(s) × {} thread(s)", self.ranks, self.threads)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::BackendKind;
 
     #[test]
-    fn names_round_trip_and_workers_split_by_kind() {
+    fn names_round_trip_and_workers_are_placed_by_kind() {
         for kind in BackendKind::ALL {
             assert_eq!(BackendKind::from_name(kind.name()), Some(kind));
-            let (threads, ranks) = kind.split(4);
-            assert_eq!(
-                threads * ranks,
-                if kind == BackendKind::Serial { 1 } else { 4 }
-            );
+            let placement = kind.placement(4);
+            assert_eq!(placement.workers(), if kind.is_parallel() { 4 } else { 1 });
+            // Only MPI places ranks, and only it needs the feature.
+            assert_eq!(placement.ranks > 1, kind.capabilities().mpi);
         }
         assert_eq!(BackendKind::from_name("cuda"), None);
         assert_eq!(BackendKind::rank_of("mpi"), 2);

@@ -439,11 +439,10 @@ fn checked(
         )
     };
     let spec = load_scene(input, overrides).map_err(in_scene)?;
-    // Every rank of an MPI run builds all the disks.
-    let copies = if backend == BackendKind::Mpi {
-        workers
-    } else {
-        1
+    let capabilities = backend.capabilities();
+    let copies = match capabilities.scene_in_every_process {
+        true => backend.placement(workers).ranks,
+        false => 1,
     };
     let footprint = spec.footprint(copies);
     check_memory(&footprint, machine).map_err(in_scene)?;
@@ -458,14 +457,14 @@ fn checked(
             ),
         )
     };
-    if spec.method.method.may_be_event() && backend != BackendKind::Serial {
+    if spec.method.method.may_be_event() && !capabilities.event_method {
         return Err(refuse(
             raw.sweep.method.as_ref().map(|m| m.span().start),
             "runs the event method, which runs on the serial backend only",
             "run the event method in a study with only `serial = true` (or sweep `method` over [\"step\"] here)",
         ));
     }
-    if spec.method.draw && backend == BackendKind::Mpi {
+    if spec.method.draw && !capabilities.draws {
         return Err(refuse(
             raw.sweep.draw.as_ref().map(|d| d.span().start),
             "draws every step, which needs all the disks in one process",

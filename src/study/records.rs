@@ -123,9 +123,9 @@ impl Record {
     /// or null in every column of the run.
     fn blank(context: &RecordContext<'_>, status: &str, error: String) -> Record {
         let env = context.environment;
-        let workers = context.workers;
-        let (threads, ranks) = context.backend.split(workers as usize);
-        let (threads, ranks) = (threads as u64, ranks as u64);
+        let placement = context.backend.placement(context.workers as usize);
+        let (threads, ranks) = (placement.threads as u64, placement.ranks as u64);
+        let workers = placement.workers() as u64;
         Record {
             study: context.study.to_owned(),
             manifest_hash: context.manifest_hash.to_owned(),

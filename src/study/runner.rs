@@ -371,7 +371,7 @@ impl Children {
             .arg(scene)
             .args(configuration.simulate_args())
             .args(program.slowdown.simulate_args(configuration.backend));
-        if self.mpi_yields_when_idle && configuration.backend == BackendKind::Mpi {
+        if self.mpi_yields_when_idle && configuration.backend.capabilities().mpi {
             command.env(YIELD_WHEN_IDLE, "1");
         }
         run_with_timeout(command, self.timeout)
@@ -472,9 +472,7 @@ fn note_configurations(
     note: &dyn Fn(&str),
 ) {
     for configuration in configurations {
-        if configuration.backend != BackendKind::Serial
-            && configuration.workers > environment.usable_cpus
-        {
+        if configuration.backend.is_parallel() && configuration.workers > environment.usable_cpus {
             note(&format!(
                 "note: {} is oversubscribed ({} workers on the {} CPUs this study may use); \
                  its rows say so",
@@ -587,7 +585,7 @@ fn runnable(study: &Study) -> anyhow::Result<Vec<&Configuration>> {
         return Ok(configurations);
     }
     let before = configurations.len();
-    configurations.retain(|c| c.backend != BackendKind::Mpi);
+    configurations.retain(|c| !c.backend.capabilities().mpi);
     let skipped = before - configurations.len();
     if configurations.is_empty() {
         bail!(
