@@ -47,12 +47,12 @@ fn mpi_ranks_count_what_they_send_as_ranks_run_as_threads_do() {
     use collide::run::scene_file;
 
     let scene = "experiments/scenes/seed-1000.toml";
-    let spec = scene_file::load(std::path::Path::new(scene), &Overrides::default()).unwrap();
+    let spec = &scene_file::load(std::path::Path::new(scene), &Overrides::default()).unwrap();
     for ranks in [2, 3] {
         let outcomes: Vec<_> = std::thread::scope(|scope| {
             let handles: Vec<_> = ThreadComm::group(ranks)
                 .into_iter()
-                .map(|comm| scope.spawn(|| distributed::run(&comm, &spec).unwrap()))
+                .map(|comm| scope.spawn(move || distributed::run(&comm, spec).unwrap()))
                 .collect();
             handles.into_iter().map(|h| h.join().unwrap()).collect()
         });
