@@ -13,7 +13,7 @@ use crate::cli::{
     CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs, ViewArgs,
 };
 use crate::exit::RunsFailed;
-use crate::report::figures::{self, cooling::Cooling, history::History, scaling};
+use crate::report::figures;
 use crate::report::{accuracy, analysis, markdown, tables as results};
 use crate::run::backend_kind::BackendKind;
 use crate::run::limits::{Machine, WorkerSource, check_memory, check_workers, placement_note};
@@ -201,7 +201,11 @@ fn write_history_report(args: &ReportArgs) -> anyhow::Result<()> {
             out.display()
         )
     })?;
-    figures::write(&History(&entries), &out)?;
+    let history = figures::Analysed {
+        history: Some(&entries),
+        ..Default::default()
+    };
+    figures::draw(&history, &out)?;
     let path = out.join("report.md");
     let text = markdown::history(&entries, &args.path);
     write_atomically(&path, |file| file.write_all(text.as_bytes()))?;
@@ -223,48 +227,30 @@ fn report_into(records: &[Record], source: &Path, out: &Path, flag: &str) -> any
         )
     })?;
     let setups = analysis::analyse(records)?;
-    let accuracy = if accuracy::is_accuracy_study(records) {
-        let groups = accuracy::analyse(records);
-        let figures = figures::accuracy_charts(&groups)
-            .iter()
-            .map(|chart| figures::write(chart.as_ref(), out).map(|_| chart.file_name()))
-            .collect::<anyhow::Result<_>>()?;
-        let cooling = accuracy::cooling(records);
-        if !cooling.is_empty() {
-            figures::write(&Cooling(&cooling), out)?;
-        }
-        Some(markdown::AccuracySection {
-            groups,
-            figures,
-            cooling,
-        })
-    } else {
-        None
+    let groups = accuracy::is_accuracy_study(records).then(|| accuracy::analyse(records));
+    let cooling = match groups {
+        Some(_) => accuracy::cooling(records),
+        None => Vec::new(),
     };
-    let mut pictures = markdown::Pictures {
-        figures: Vec::with_capacity(setups.len()),
+    let analysed = figures::Analysed {
+        setups: &setups,
+        accuracy: groups.as_deref(),
+        cooling: &cooling,
+        history: None,
+    };
+    let drawn = figures::draw(&analysed, out)?;
+    let pictures = markdown::Pictures {
+        figures: drawn.by_setup(setups.len()),
         scene: out
             .join(SCENE_PICTURE)
             .exists()
             .then(|| SCENE_PICTURE.to_owned()),
-        accuracy,
+        accuracy: groups.map(|groups| markdown::AccuracySection {
+            groups,
+            figures: drawn.accuracy(),
+            cooling,
+        }),
     };
-    for (index, setup) in setups.iter().enumerate() {
-        // One backend at one worker count has no scaling to draw (e.g. accuracy studies).
-        if !setup.scales() {
-            pictures.figures.push(Vec::new());
-            continue;
-        }
-        let drawn = scaling::draw_setup(setup, out, &format!("setup-{}", index + 1))?;
-        let names = drawn
-            .into_iter()
-            .map(|(figure, path)| {
-                let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
-                (figure, name.unwrap_or_default())
-            })
-            .collect();
-        pictures.figures.push(names);
-    }
     let path = out.join("report.md");
     let text = markdown::markdown(records, &setups, &source.display().to_string(), &pictures);
     write_atomically(&path, |file| file.write_all(text.as_bytes()))?;

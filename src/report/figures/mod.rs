@@ -1,17 +1,15 @@
 //! The report's figures (PNG, plotters), one file per figure behind one interface,
 //! [`Chart`]: the scaling figures of each setup (`scaling`: time, speedup, efficiency and
 //! steps per second against workers), the accuracy study's (`pareto`, `stability`,
-//! `cooling`) and the check history's (`history`). Shared here: the embedded font (DejaVu Sans, so no system font is
-//! needed), the palette, the legend and the titled canvas.
+//! `cooling`) and the check history's (`history`). Which figures a report gets is decided
+//! here, not by its caller: [`draw`] asks each figure type of the list which of the
+//! analysed data it applies to, draws those, and says what it drew for report.md to link.
+//! Shared here too: the embedded font (DejaVu Sans, so no system font is needed), the
+//! palette, the legend and the titled canvas. What the figures show is computed by the
+//! analysis (`report::analysis`, `report::accuracy`); report.md is `report::markdown`'s.
 //!
 //! A new figure is a file with a type that implements [`Chart`], and one line in the
-//! list that draws it ([`accuracy_charts`] for the accuracy study's).
-
-pub mod cooling;
-pub mod history;
-pub mod pareto;
-pub mod scaling;
-pub mod stability;
+//! `figures!` list below.
 
 use std::path::{Path, PathBuf};
 use std::sync::Once;
@@ -20,11 +18,76 @@ use anyhow::anyhow;
 use plotters::coord::CoordTranslate;
 use plotters::prelude::*;
 
-use crate::report::accuracy::PackingGroup;
+use crate::report::accuracy::{CoolingCurve, PackingGroup};
+use crate::report::analysis::Setup;
+use crate::study::history::Entry;
 use crate::system::output::{Canvas, write_png};
 
+/// Declares the figure modules of the list and `every_chart`, which asks each of their
+/// types in turn (the list's order) which figures apply.
+macro_rules! figures {
+    ($($module:ident::$chart:ident),+ $(,)?) => {
+        $(pub mod $module;)+
+
+        /// Every figure that `analysed` gets, with where report.md links it.
+        fn every_chart<'a>(analysed: &Analysed<'a>) -> Vec<(Link, Box<dyn Chart<'a> + 'a>)> {
+            let mut charts: Vec<(Link, Box<dyn Chart<'a> + 'a>)> = Vec::new();
+            $(
+                for (link, chart) in $module::$chart::of(analysed) {
+                    charts.push((link, Box::new(chart)));
+                }
+            )+
+            charts
+        }
+    };
+}
+
+// Every figure type, one line each: its file (module) and the type in it that implements
+// `Chart`. A report's figures are drawn in this order.
+figures! {
+    scaling::ScalingChart,
+    pareto::Pareto,
+    stability::Stability,
+    cooling::Cooling,
+    history::History,
+}
+
+/// What figures are drawn from: a study's analysed records, or a check history.
+#[derive(Clone, Copy, Default)]
+pub struct Analysed<'a> {
+    /// The study's setups ([`crate::report::analysis::analyse`]), in the manifest's order.
+    pub setups: &'a [Setup],
+    /// An accuracy study's packing groups ([`crate::report::accuracy::analyse`]); `None`
+    /// for any other study.
+    pub accuracy: Option<&'a [PackingGroup]>,
+    /// The e < 1 runs' cooling curves ([`crate::report::accuracy::cooling`]); empty for
+    /// elastic studies.
+    pub cooling: &'a [CoolingCurve],
+    /// A check history's entries, oldest check first; `None` for a study.
+    pub history: Option<&'a [Entry]>,
+}
+
+/// Where report.md links a figure.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Link {
+    /// Under the tables of the setup at `index` (in [`Analysed::setups`]), as its `figure`.
+    Setup {
+        index: usize,
+        figure: scaling::Figure,
+    },
+    /// In the accuracy section's list of figures.
+    Accuracy,
+    /// By its file name, in a section of its own (the cooling curves, the check history).
+    OwnSection,
+}
+
 /// One figure of a report: a PNG beside report.md.
-pub trait Chart {
+pub trait Chart<'a> {
+    /// The figures of this type that `analysed` gets, in the order report.md shows them,
+    /// each with where report.md links it; none when the type does not apply.
+    fn of(analysed: &Analysed<'a>) -> Vec<(Link, Self)>
+    where
+        Self: Sized;
     /// Its file name in the report folder.
     fn file_name(&self) -> String;
     /// Its size in pixels (width, height).
@@ -33,21 +96,59 @@ pub trait Chart {
     fn draw(&self, canvas: &Canvas<'_>) -> anyhow::Result<()>;
 }
 
+/// What [`draw`] drew, in the order drawn: each figure's file name (relative to the
+/// report) and where report.md links it.
+#[derive(Clone, Debug, Default)]
+pub struct Drawn(pub Vec<(Link, String)>);
+
+impl Drawn {
+    /// The figures of each of the first `n_setups` setups, in the order drawn (the
+    /// shape of [`crate::report::markdown::Pictures::figures`]).
+    pub fn by_setup(&self, n_setups: usize) -> Vec<Vec<(scaling::Figure, String)>> {
+        (0..n_setups)
+            .map(|setup| {
+                self.0
+                    .iter()
+                    .filter_map(|(link, name)| match *link {
+                        Link::Setup { index, figure } if index == setup => {
+                            Some((figure, name.clone()))
+                        }
+                        _ => None,
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// The figures of the accuracy section's list, in the order drawn.
+    pub fn accuracy(&self) -> Vec<String> {
+        self.0
+            .iter()
+            .filter(|(link, _)| *link == Link::Accuracy)
+            .map(|(_, name)| name.clone())
+            .collect()
+    }
+}
+
+/// Draws every figure that `analysed` gets into `dir` (each atomically), in the list's
+/// order; returns what it drew.
+pub fn draw(analysed: &Analysed<'_>, dir: &Path) -> anyhow::Result<Drawn> {
+    every_chart(analysed)
+        .into_iter()
+        .map(|(link, chart)| {
+            write(chart.as_ref(), dir)?;
+            Ok((link, chart.file_name()))
+        })
+        .collect::<anyhow::Result<_>>()
+        .map(Drawn)
+}
+
 /// Draws `chart` into `dir` (atomically); returns its path.
-pub fn write(chart: &dyn Chart, dir: &Path) -> anyhow::Result<PathBuf> {
+pub fn write(chart: &dyn Chart<'_>, dir: &Path) -> anyhow::Result<PathBuf> {
     register_font();
     let path = dir.join(chart.file_name());
     write_png(&path, chart.size(), |canvas| chart.draw(canvas))?;
     Ok(path)
-}
-
-/// The accuracy study's figures of speed against accuracy, in the order the report
-/// shows them.
-pub fn accuracy_charts(groups: &[PackingGroup]) -> Vec<Box<dyn Chart + '_>> {
-    vec![
-        Box::new(pareto::Pareto(groups)),
-        Box::new(stability::Stability(groups)),
-    ]
 }
 
 pub(crate) const FONT: &str = "sans-serif";

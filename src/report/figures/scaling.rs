@@ -10,7 +10,7 @@ use plotters::coord::combinators::WithKeyPoints;
 use plotters::prelude::*;
 
 use crate::report::analysis::{BackendScaling, Setup};
-use crate::report::figures::{Chart, FONT, PALETTE, draw_legend, write};
+use crate::report::figures::{Analysed, Chart, FONT, Link, PALETTE, draw_legend, write};
 use crate::run::backend_kind::BackendKind;
 use crate::study::manifest::Scaling;
 use crate::system::output::Canvas;
@@ -115,10 +115,28 @@ impl Figure {
 pub struct ScalingChart<'a> {
     pub figure: Figure,
     pub setup: &'a Setup,
-    pub prefix: &'a str,
+    pub prefix: String,
 }
 
-impl Chart for ScalingChart<'_> {
+impl<'a> Chart<'a> for ScalingChart<'a> {
+    /// The figures of every setup that scales, as `setup-<n>-<figure>.png` (n counts the
+    /// study's setups from 1), linked under the setup's tables.
+    fn of(analysed: &Analysed<'a>) -> Vec<(Link, Self)> {
+        analysed
+            .setups
+            .iter()
+            .enumerate()
+            // One backend at one worker count has no scaling to draw (e.g. accuracy studies).
+            .filter(|(_, setup)| setup.scales())
+            .flat_map(|(index, setup)| {
+                charts(setup, format!("setup-{}", index + 1)).map(move |chart| {
+                    let figure = chart.figure;
+                    (Link::Setup { index, figure }, chart)
+                })
+            })
+            .collect()
+    }
+
     fn file_name(&self) -> String {
         format!("{}-{}.png", self.prefix, self.figure.file_stem())
     }
@@ -132,23 +150,28 @@ impl Chart for ScalingChart<'_> {
     }
 }
 
-/// Draws every figure of `setup` into `dir` as `<prefix>-<figure>.png`; returns the paths.
+/// The figures `setup` shows ([`Figure::shows`]), in [`Figure::ALL`]'s order, named
+/// `<prefix>-<figure>.png`.
+fn charts(setup: &Setup, prefix: String) -> impl Iterator<Item = ScalingChart<'_>> {
+    Figure::ALL
+        .into_iter()
+        .filter(|figure| figure.shows(setup))
+        .map(move |figure| ScalingChart {
+            figure,
+            setup,
+            prefix: prefix.clone(),
+        })
+}
+
+/// Draws every figure of `setup` into `dir` as `<prefix>-<figure>.png`, whether or not
+/// it scales; returns the paths.
 pub fn draw_setup(
     setup: &Setup,
     dir: &Path,
     prefix: &str,
 ) -> anyhow::Result<Vec<(Figure, PathBuf)>> {
-    Figure::ALL
-        .into_iter()
-        .filter(|figure| figure.shows(setup))
-        .map(|figure| {
-            let chart = ScalingChart {
-                figure,
-                setup,
-                prefix,
-            };
-            Ok((figure, write(&chart, dir)?))
-        })
+    charts(setup, prefix.to_owned())
+        .map(|chart| Ok((chart.figure, write(&chart, dir)?)))
         .collect()
 }
 

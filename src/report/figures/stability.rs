@@ -2,11 +2,13 @@
 //! missed-collision fraction, with the failure boundary.
 
 use anyhow::anyhow;
+use plotters::coord::ranged1d::SegmentedCoord;
+use plotters::coord::types::RangedCoordusize;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::report::accuracy::{AccuracyPoint, FAILURE_MISSED_FRACTION, PackingGroup};
-use crate::report::figures::{Chart, ERROR_FLOOR, FONT, titled_canvas};
+use crate::report::figures::{Analysed, Chart, ERROR_FLOOR, FONT, Link, titled_canvas};
 use crate::system::output::Canvas;
 
 /// File name of the figure.
@@ -16,7 +18,16 @@ const STABILITY_SIZE: (u32, u32) = (1100, 560);
 /// The figure of an accuracy study's packing groups.
 pub struct Stability<'a>(pub &'a [PackingGroup]);
 
-impl Chart for Stability<'_> {
+impl<'a> Chart<'a> for Stability<'a> {
+    /// One figure for an accuracy study, listed in its accuracy section.
+    fn of(analysed: &Analysed<'a>) -> Vec<(Link, Self)> {
+        analysed
+            .accuracy
+            .map(|groups| (Link::Accuracy, Stability(groups)))
+            .into_iter()
+            .collect()
+    }
+
     fn file_name(&self) -> String {
         STABILITY_FILE.to_owned()
     }
@@ -30,17 +41,24 @@ impl Chart for Stability<'_> {
     }
 }
 
+/// The map: one segment per column (v_rms·dt/r) across, one per row (packing) up.
+type Map<'a, 'b> = ChartContext<
+    'a,
+    BitMapBackend<'b>,
+    Cartesian2d<SegmentedCoord<RangedCoordusize>, SegmentedCoord<RangedCoordusize>>,
+>;
+
+/// A cell's corner or edge in the map's coordinates.
+type Corner = (SegmentValue<usize>, SegmentValue<usize>);
+
+/// `cells[j][i]`: the step run at row j (packing), column i, if one was run there.
+type Cells<'g> = Vec<Vec<Option<&'g AccuracyPoint>>>;
+
+/// Step sizes within this relative distance share a column.
+const SAME_COLUMN: f64 = 0.02;
+
 fn draw_stability(groups: &[PackingGroup], canvas: &Canvas<'_>) -> anyhow::Result<()> {
-    // Columns: the distinct v_rms·dt/r of the step runs, ascending; rows: the packings.
-    let mut columns: Vec<f64> = groups
-        .iter()
-        .flat_map(|g| g.steps.iter().map(|p| p.step_over_radius))
-        .filter(|x| x.is_finite())
-        .collect();
-    columns.sort_by(f64::total_cmp);
-    columns.dedup_by(|a, b| (*a / *b - 1.0).abs() < 0.02);
-    let column_of = |x: f64| columns.iter().position(|c| (x / c - 1.0).abs() < 0.02);
-    let (nx, ny) = (columns.len().max(1), groups.len().max(1));
+    let columns = columns(groups);
     let root = titled_canvas(
         canvas,
         &format!(
@@ -50,7 +68,63 @@ fn draw_stability(groups: &[PackingGroup], canvas: &Canvas<'_>) -> anyhow::Resul
     )?;
     let (map_area, scale_area) = root.split_horizontally(STABILITY_SIZE.0 - 130);
     draw_colour_scale(&scale_area)?;
-    let mut chart = ChartBuilder::on(&map_area)
+    let mut chart = map_axes(&map_area, &columns, groups)?;
+    let cells = cells(groups, &columns);
+    for (j, row) in cells.iter().enumerate() {
+        for (i, cell) in row.iter().enumerate() {
+            if let Some(point) = cell {
+                draw_cell(&mut chart, (i, j), point)?;
+            }
+        }
+    }
+    chart
+        .draw_series(
+            failure_edges(&cells)
+                .into_iter()
+                .map(|edge| PathElement::new(edge, BLACK.stroke_width(4))),
+        )
+        .map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}
+
+/// The map's columns: the distinct v_rms·dt/r of the step runs, ascending.
+fn columns(groups: &[PackingGroup]) -> Vec<f64> {
+    let mut columns: Vec<f64> = groups
+        .iter()
+        .flat_map(|g| g.steps.iter().map(|p| p.step_over_radius))
+        .filter(|x| x.is_finite())
+        .collect();
+    columns.sort_by(f64::total_cmp);
+    columns.dedup_by(|a, b| (*a / *b - 1.0).abs() < SAME_COLUMN);
+    columns
+}
+
+/// The step runs of `groups` (the rows) placed in `columns`.
+fn cells<'g>(groups: &'g [PackingGroup], columns: &[f64]) -> Cells<'g> {
+    let column_of = |x: f64| {
+        columns
+            .iter()
+            .position(|c| (x / c - 1.0).abs() < SAME_COLUMN)
+    };
+    let mut cells: Cells<'g> = vec![vec![None; columns.len().max(1)]; groups.len().max(1)];
+    for (j, group) in groups.iter().enumerate() {
+        for point in &group.steps {
+            if let Some(i) = column_of(point.step_over_radius) {
+                cells[j][i] = Some(point);
+            }
+        }
+    }
+    cells
+}
+
+/// The map's axes, labelled by the columns' step sizes and the rows' packings.
+fn map_axes<'a, 'b>(
+    area: &'a Canvas<'b>,
+    columns: &[f64],
+    groups: &[PackingGroup],
+) -> anyhow::Result<Map<'a, 'b>> {
+    let (nx, ny) = (columns.len().max(1), groups.len().max(1));
+    let mut chart = ChartBuilder::on(area)
         .margin(16)
         .x_label_area_size(50)
         .y_label_area_size(80)
@@ -85,46 +159,43 @@ fn draw_stability(groups: &[PackingGroup], canvas: &Canvas<'_>) -> anyhow::Resul
         .y_label_formatter(&row_label)
         .draw()
         .map_err(|e| anyhow!("{e}"))?;
-    // cells[j][i]: the point at row j (packing), column i.
-    let mut cells: Vec<Vec<Option<&AccuracyPoint>>> = vec![vec![None; nx]; ny];
-    for (j, group) in groups.iter().enumerate() {
-        for point in &group.steps {
-            if let Some(i) = column_of(point.step_over_radius) {
-                cells[j][i] = Some(point);
-            }
-        }
-    }
-    for (j, row) in cells.iter().enumerate() {
-        for (i, cell) in row.iter().enumerate() {
-            let Some(point) = cell else { continue };
-            use SegmentValue::{CenterOf, Exact};
-            chart
-                .draw_series([Rectangle::new(
-                    [(Exact(i), Exact(j)), (Exact(i + 1), Exact(j + 1))],
-                    missed_colour(point.missed_fraction).filled(),
-                )])
-                .map_err(|e| anyhow!("{e}"))?;
-            let style =
-                TextStyle::from((FONT, 15).into_font()).pos(Pos::new(HPos::Center, VPos::Center));
-            let label = EmptyElement::at((CenterOf(i), CenterOf(j)))
-                + Text::new(
-                    if point.missed_fraction == 0.0 {
-                        "m 0".to_owned()
-                    } else {
-                        format!("m {:.1e}", point.missed_fraction)
-                    },
-                    (0, -10),
-                    style.clone(),
-                )
-                + Text::new(format!("ov {:.3}", point.max_overlap), (0, 10), style);
-            chart.draw_series([label]).map_err(|e| anyhow!("{e}"))?;
-        }
-    }
-    // The failure boundary: every cell edge between a failed and a passing cell.
+    Ok(chart)
+}
+
+/// The cell at column i, row j: coloured by its missed fraction, labelled with it and
+/// the maximum overlap.
+fn draw_cell(
+    chart: &mut Map<'_, '_>,
+    (i, j): (usize, usize),
+    point: &AccuracyPoint,
+) -> anyhow::Result<()> {
+    use SegmentValue::{CenterOf, Exact};
+    chart
+        .draw_series([Rectangle::new(
+            [(Exact(i), Exact(j)), (Exact(i + 1), Exact(j + 1))],
+            missed_colour(point.missed_fraction).filled(),
+        )])
+        .map_err(|e| anyhow!("{e}"))?;
+    let style = TextStyle::from((FONT, 15).into_font()).pos(Pos::new(HPos::Center, VPos::Center));
+    let missed = if point.missed_fraction == 0.0 {
+        "m 0".to_owned()
+    } else {
+        format!("m {:.1e}", point.missed_fraction)
+    };
+    let label = EmptyElement::at((CenterOf(i), CenterOf(j)))
+        + Text::new(missed, (0, -10), style.clone())
+        + Text::new(format!("ov {:.3}", point.max_overlap), (0, 10), style);
+    chart.draw_series([label]).map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}
+
+/// The failure boundary: every cell edge between a failed and a passing cell.
+fn failure_edges(cells: &Cells<'_>) -> Vec<[Corner; 2]> {
+    use SegmentValue::Exact;
     let failed = |(j, i): (usize, usize)| cells[j][i].map(AccuracyPoint::failed);
     let differ = |a, b| matches!((failed(a), failed(b)), (Some(x), Some(y)) if x != y);
-    use SegmentValue::Exact;
-    let mut edges: Vec<[(SegmentValue<usize>, SegmentValue<usize>); 2]> = Vec::new();
+    let (ny, nx) = (cells.len(), cells.first().map_or(0, Vec::len));
+    let mut edges = Vec::new();
     for j in 0..ny {
         for i in 0..nx {
             if i + 1 < nx && differ((j, i), (j, i + 1)) {
@@ -135,14 +206,7 @@ fn draw_stability(groups: &[PackingGroup], canvas: &Canvas<'_>) -> anyhow::Resul
             }
         }
     }
-    chart
-        .draw_series(
-            edges
-                .into_iter()
-                .map(|edge| PathElement::new(edge, BLACK.stroke_width(4))),
-        )
-        .map_err(|e| anyhow!("{e}"))?;
-    Ok(())
+    edges
 }
 
 /// The stability map's colour scale: missed-collision fraction, log, floor to 1.
