@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
-use crate::run::backend_kind::BackendKind;
+use crate::run::backend_kind::{BackendKind, MPI_LAUNCHER};
 use crate::run::overrides::Overrides;
 
 #[derive(Debug, Parser)]
@@ -285,7 +285,7 @@ pub struct SimulateArgs {
     pub oversubscribe: bool,
     /// MPI launcher and its options, followed by `-n RANKS` and this program
     /// (e.g. "mpirun --bind-to core", or "mpiexec" for MPICH).
-    #[arg(long, env = "COLLIDE_MPI_LAUNCHER", default_value = "mpirun")]
+    #[arg(long, env = "COLLIDE_MPI_LAUNCHER", default_value = MPI_LAUNCHER)]
     pub launcher: String,
     /// Seconds before a launched MPI run is killed with all its ranks [default: the
     /// environment's COLLIDE_MPI_TIMEOUT, else 3600]. Read only with --backend mpi.

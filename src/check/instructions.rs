@@ -10,7 +10,7 @@ use std::process::{Command, Output};
 use anyhow::{Context, bail};
 use serde::{Deserialize, Serialize};
 
-use crate::run::backend_kind::BackendKind;
+use crate::run::backend_kind::{BackendKind, MPI_LAUNCHER};
 use crate::study::manifest::Configuration;
 use crate::study::runner::{self, Program};
 
@@ -46,7 +46,7 @@ pub fn count(
     }
     let mut counts = Vec::new();
     for kind in BackendKind::ALL {
-        if kind == BackendKind::Mpi && !cfg!(feature = "mpi") {
+        if kind.capabilities().mpi && !cfg!(feature = "mpi") {
             continue;
         }
         let Some(configuration) = configurations.iter().find(|c| c.backend == kind) else {
@@ -73,8 +73,8 @@ pub fn count(
 type Counted = (Output, Result<u64, String>);
 
 /// The instructions `program` executes for `command` (its `collide` arguments) under
-/// callgrind: the whole process's for serial and rayon, rank 0's own for MPI
-/// ([`count_ranks`]).
+/// callgrind: the whole process's for a backend that runs in one, rank 0's own for one
+/// whose ranks the MPI launcher starts ([`count_ranks`]).
 fn callgrind(
     program: &Program,
     command: &[String],
@@ -83,9 +83,9 @@ fn callgrind(
     work_dir: &Path,
 ) -> anyhow::Result<u64> {
     let slowdown = program.slowdown.simulate_args(kind);
-    let (out, counted) = match kind {
-        BackendKind::Mpi => count_ranks(program, command, &slowdown, ranks, work_dir)?,
-        BackendKind::Serial | BackendKind::Rayon => count_process(program, command, &slowdown)?,
+    let (out, counted) = match kind.capabilities().mpi {
+        true => count_ranks(program, command, &slowdown, ranks, work_dir)?,
+        false => count_process(program, command, &slowdown)?,
     };
     match counted {
         Ok(instructions) if out.status.success() => Ok(instructions),
@@ -127,7 +127,7 @@ fn count_process(
     Ok((out, collected.ok_or(stderr)))
 }
 
-/// `ranks` MPI ranks started by `mpirun`, each under its own callgrind (files in
+/// `ranks` MPI ranks started by [`MPI_LAUNCHER`], each under its own callgrind (files in
 /// `work_dir`): rank 0's instructions in collide's own code only, because the MPI
 /// library polls for messages while a rank waits, a count that varied by ±25% from run
 /// to run.
@@ -140,7 +140,7 @@ fn count_ranks(
 ) -> anyhow::Result<Counted> {
     let files = work_dir.join("callgrind");
     let rank = "%q{OMPI_COMM_WORLD_RANK}";
-    let out = Command::new("mpirun")
+    let out = Command::new(MPI_LAUNCHER)
         .args(["-n", &ranks.to_string(), "valgrind", "--tool=callgrind"])
         .arg(format!(
             "--callgrind-out-file={}.out.{rank}",
@@ -154,7 +154,7 @@ fn count_ranks(
         .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
         .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
         .output()
-        .context("cannot run mpirun")?;
+        .with_context(|| format!("cannot run {MPI_LAUNCHER}"))?;
     let exe = std::fs::canonicalize(&program.exe)?;
     let counted = std::fs::read_to_string(files.with_extension("out.0"))
         .ok()

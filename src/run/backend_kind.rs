@@ -111,6 +111,11 @@ pub struct Capabilities {
     pub mpi: bool,
 }
 
+/// The MPI launcher: it starts a backend's ranks (`-n RANKS`, the program and its
+/// arguments follow) where [`Capabilities::mpi`], unless `--launcher` (or
+/// `COLLIDE_MPI_LAUNCHER`) names another for `collide simulate`.
+pub const MPI_LAUNCHER: &str = "mpirun";
+
 /// Where a run's work goes: `ranks` processes, each stepping on `threads` threads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct Placement {
