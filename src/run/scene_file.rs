@@ -595,33 +595,7 @@ impl Validator<'_> {
             Some(Sourced { value, .. }) => value,
         };
         let radius = self.radius(raw)?.0;
-        if let Extent::Size { width, height } = extent {
-            // The area fraction the box asks for, refused here with the box's line rather
-            // than by the placement later.
-            let packing = n_particles as f64 * radius.mean_area() / (width * height);
-            let limit = placement.max_packing();
-            if packing > limit {
-                return Err(self.invalid(
-                    self.origin_of(&raw.size),
-                    "scene.size",
-                    format!(
-                        "is {width} × {height}, where {n_particles} disks cover an area \
-                         fraction of {packing:.3}, above the {limit:.3} that {} placement reaches",
-                        placement.name()
-                    ),
-                    &match packing <= std::f64::consts::FRAC_PI_4 {
-                        true => "enlarge the box, lower n or the radius, or use placement = \
-                                 \"lattice\""
-                            .to_owned(),
-                        false => format!(
-                            "enlarge the box at least {:.2}-fold in area, or lower n or the radius \
-                             (no placement packs disks beyond π/4 ≈ 0.785)",
-                            packing / std::f64::consts::FRAC_PI_4
-                        ),
-                    },
-                ));
-            }
-        }
+        self.box_holds(raw, n_particles, &radius, placement, extent)?;
         Ok(GasSpec {
             n_particles,
             extent,
@@ -637,6 +611,46 @@ impl Validator<'_> {
                 .pick("--seed", overrides.seed, &raw.seed, |s| *s)
                 .map_or(0, |s| s.value),
         })
+    }
+
+    /// Refuses, at the box's line, a box given by `size` that `n_particles` disks of
+    /// `radius` would fill beyond what `placement` reaches (rather than the placement
+    /// failing later).
+    fn box_holds(
+        &self,
+        raw: &RawScene,
+        n_particles: usize,
+        radius: &RadiusDistribution,
+        placement: Placement,
+        extent: Extent,
+    ) -> Result<(), SceneFileError> {
+        let Extent::Size { width, height } = extent else {
+            return Ok(());
+        };
+        let packing = n_particles as f64 * radius.mean_area() / (width * height);
+        let limit = placement.max_packing();
+        if packing > limit {
+            return Err(self.invalid(
+                self.origin_of(&raw.size),
+                "scene.size",
+                format!(
+                    "is {width} × {height}, where {n_particles} disks cover an area \
+                     fraction of {packing:.3}, above the {limit:.3} that {} placement reaches",
+                    placement.name()
+                ),
+                &match packing <= std::f64::consts::FRAC_PI_4 {
+                    true => "enlarge the box, lower n or the radius, or use placement = \
+                             \"lattice\""
+                        .to_owned(),
+                    false => format!(
+                        "enlarge the box at least {:.2}-fold in area, or lower n or the radius \
+                         (no placement packs disks beyond π/4 ≈ 0.785)",
+                        packing / std::f64::consts::FRAC_PI_4
+                    ),
+                },
+            ));
+        }
+        Ok(())
     }
 
     fn explicit_scene(

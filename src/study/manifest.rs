@@ -341,19 +341,7 @@ fn configurations(
         ));
     }
     let n_configurations = raw.scenes.get_ref().len() * points.len() * backends.len();
-    let most_repetitions = repetitions.iter().copied().max().unwrap_or(1);
-    let n_runs = n_configurations as u64 * u64::from(most_repetitions);
-    if n_configurations > MAX_CONFIGURATIONS || n_runs > MAX_RUNS {
-        return Err(at.invalid(
-            raw.scenes.span().start,
-            format!(
-                "the study has {n_configurations} configurations (scenes × sweep points × \
-                 backends) of up to {most_repetitions} repetitions, up to {n_runs} runs; \
-                 collide runs at most {MAX_CONFIGURATIONS} configurations and {MAX_RUNS} \
-                 runs in a study: sweep fewer values, lower `repetitions`, or split the study"
-            ),
-        ));
-    }
+    check_study_size(at, raw, n_configurations, &repetitions)?;
     let folder = at.path.parent().unwrap_or(Path::new("."));
     let mut configurations = Vec::new();
     let mut seen = BTreeSet::new();
@@ -370,17 +358,8 @@ fn configurations(
             for &(backend, workers) in &backends {
                 let mut overrides = point.clone();
                 if scaling == Scaling::Weak {
-                    let base = per_worker_n(&input, &overrides).map_err(|message| {
+                    let n = weak_n(&input, &overrides, workers).map_err(|message| {
                         at.invalid(offset, format!("scene `{scene}`: {message}"))
-                    })?;
-                    let n = base.checked_mul(workers as i64).ok_or_else(|| {
-                        at.invalid(
-                            offset,
-                            format!(
-                                "scene `{scene}`: weak scaling makes n = {base} × {workers} \
-                                 disks, beyond any count collide can hold; lower n"
-                            ),
-                        )
                     })?;
                     overrides.n = Some(n);
                 }
@@ -417,6 +396,42 @@ fn configurations(
         }
     }
     Ok(configurations)
+}
+
+/// Refuses, before anything is expanded, a study of more than [`MAX_CONFIGURATIONS`]
+/// configurations or [`MAX_RUNS`] runs.
+fn check_study_size(
+    at: &Locator,
+    raw: &RawManifest,
+    n_configurations: usize,
+    repetitions: &[u32],
+) -> Result<(), ManifestError> {
+    let most_repetitions = repetitions.iter().copied().max().unwrap_or(1);
+    let n_runs = n_configurations as u64 * u64::from(most_repetitions);
+    if n_configurations <= MAX_CONFIGURATIONS && n_runs <= MAX_RUNS {
+        return Ok(());
+    }
+    Err(at.invalid(
+        raw.scenes.span().start,
+        format!(
+            "the study has {n_configurations} configurations (scenes × sweep points × \
+             backends) of up to {most_repetitions} repetitions, up to {n_runs} runs; collide \
+             runs at most {MAX_CONFIGURATIONS} configurations and {MAX_RUNS} runs in a study: \
+             sweep fewer values, lower `repetitions`, or split the study"
+        ),
+    ))
+}
+
+/// A weak-scaling configuration's n: the scene's (or swept) n times the workers, or
+/// why not.
+fn weak_n(input: &SceneInput, overrides: &Overrides, workers: usize) -> Result<i64, String> {
+    let base = per_worker_n(input, overrides)?;
+    base.checked_mul(workers as i64).ok_or_else(|| {
+        format!(
+            "weak scaling makes n = {base} × {workers} disks, beyond any count collide can \
+             hold; lower n"
+        )
+    })
 }
 
 /// The memory footprint of `scene` (its `input`) with `overrides` on `backend` and
@@ -509,6 +524,30 @@ fn backend_list(raw: &RawBackends, machine: &Machine) -> Result<Vec<(BackendKind
     Ok(list)
 }
 
+/// Refuses, before any point is made (a product of long lists would fill memory first),
+/// a sweep of more than [`MAX_CONFIGURATIONS`] points: the product of the `free` lists'
+/// lengths and the `paired` lists' common length.
+fn check_point_count(paired: &[SweptList], free: &[SweptList]) -> Result<(), (usize, String)> {
+    let n_points = free
+        .iter()
+        .map(|list| list.len)
+        .chain(paired.first().map(|list| list.len))
+        .try_fold(1usize, usize::checked_mul)
+        .filter(|&n| n <= MAX_CONFIGURATIONS);
+    match n_points {
+        Some(_) => Ok(()),
+        None => Err((
+            free.first()
+                .or(paired.first())
+                .map_or(0, |list| list.offset),
+            format!(
+                "the sweep's lists multiply to more than {MAX_CONFIGURATIONS} points; sweep \
+                 fewer values, pair lists with `sweep.zip`, or split the study"
+            ),
+        )),
+    }
+}
+
 /// The sweep's points: the full product of its lists, except that the lists named in
 /// `zip` pair up element by element (and must have the same length).
 fn sweep_points(sweep: &SweepLists) -> Result<Vec<Overrides>, (usize, String)> {
@@ -538,26 +577,7 @@ fn sweep_points(sweep: &SweepLists) -> Result<Vec<Overrides>, (usize, String)> {
     let (paired, free): (Vec<_>, Vec<_>) = lists
         .into_iter()
         .partition(|list| zipped.iter().any(|z| z == list.key));
-    // Counted before any point is made: a product of long lists would fill memory first.
-    let n_points = free
-        .iter()
-        .map(|list| list.len)
-        .chain(paired.first().map(|list| list.len))
-        .try_fold(1usize, usize::checked_mul)
-        .filter(|&n| n <= MAX_CONFIGURATIONS);
-    if n_points.is_none() {
-        let offset = free
-            .first()
-            .or(paired.first())
-            .map_or(0, |list| list.offset);
-        return Err((
-            offset,
-            format!(
-                "the sweep's lists multiply to more than {MAX_CONFIGURATIONS} points; sweep \
-                 fewer values, pair lists with `sweep.zip`, or split the study"
-            ),
-        ));
-    }
+    check_point_count(&paired, &free)?;
     let mut points = vec![Overrides::default()];
     if let Some(SweptList { len, .. }) = paired.first() {
         if let Some(SweptList { key, .. }) = paired.iter().find(|list| list.len != *len) {

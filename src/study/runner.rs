@@ -146,129 +146,189 @@ pub fn run_study(
     let environment = Environment::capture();
     let dir = options.out.join(&study.name);
     let _held = open_results_folder(&dir, &note)?;
-    let manifest_hash = manifest_hash(manifest_text);
     let build_id = build_id(&environment);
     let scene_hashes = configurations
         .iter()
         .map(|configuration| scene_hash(&configuration.input))
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let wanted: Vec<RunIdentity> = (0..study.rounds())
-        .flat_map(|rep| (0..configurations.len()).map(move |c| (rep, c)))
-        .filter(|&(rep, c)| rep < configurations[c].repetitions)
-        .map(|(rep, c)| RunIdentity {
-            config_key: configurations[c].key(),
-            scene_hash: scene_hashes[c].clone(),
-            repetition: rep,
-        })
-        .collect();
-    let (results, mut rows) = match options.resume {
+    let wanted = wanted_runs(study, &configurations, &scene_hashes);
+    let identities: Vec<RunIdentity> = wanted.iter().map(|(_, _, id)| id.clone()).collect();
+    let (results, rows) = match options.resume {
         false => (new_results_path(&dir, &environment), Vec::new()),
-        true => resumed(&dir, &build_id, &wanted, &environment, &note)?,
+        true => resumed(&dir, &build_id, &identities, &environment, &note)?,
     };
-    let kept_note = |rows: &[Record]| interrupted_note(rows, &results, &options.continue_with);
-    *interrupt_note() = kept_note(&rows);
-    let kept = rows.len();
     let done: BTreeSet<RunIdentity> = rows.iter().map(RunIdentity::of).collect();
-    let kept_ok = rows.len();
-
+    let todo: Vec<(u32, usize)> = wanted
+        .into_iter()
+        .filter(|(_, _, identity)| !done.contains(identity))
+        .map(|(rep, c, _)| (rep, c))
+        .collect();
     note_configurations(&configurations, &environment, &note);
-    let scene_files = materialize_scenes(&dir, &configurations)?;
-    let todo: Vec<(u32, usize)> = (0..study.rounds())
+    let sitting = Sitting {
+        study,
+        scene_files: materialize_scenes(&dir, &configurations)?,
+        configurations,
+        scene_hashes,
+        manifest_hash: manifest_hash(manifest_text),
+        build_id,
+        environment,
+        started_utc: records::utc_now(),
+        results,
+    };
+    sitting.run(&todo, rows, options, quiet, &note)
+}
+
+/// Every run a study asks for, round by round: (repetition, configuration index, its
+/// identity).
+fn wanted_runs(
+    study: &Study,
+    configurations: &[&Configuration],
+    scene_hashes: &[String],
+) -> Vec<(u32, usize, RunIdentity)> {
+    (0..study.rounds())
         .flat_map(|rep| (0..configurations.len()).map(move |c| (rep, c)))
         .filter(|&(rep, c)| rep < configurations[c].repetitions)
-        .filter(|&(rep, c)| {
-            !done.contains(&RunIdentity {
+        .map(|(rep, c)| {
+            let identity = RunIdentity {
                 config_key: configurations[c].key(),
                 scene_hash: scene_hashes[c].clone(),
                 repetition: rep,
-            })
+            };
+            (rep, c, identity)
         })
-        .collect();
-    let warm: BTreeSet<usize> = todo.iter().map(|&(_, c)| c).collect();
-    let n_programs = options.programs.len();
-    let total = (n_programs * (warm.len() * study.warmups as usize + todo.len())) as u64;
-    let progress = progress_bar(quiet, total);
-    let counts = configurations.iter().map(|c| c.repetitions);
-    let (fewest, most) = (counts.clone().min().unwrap_or(0), counts.max().unwrap_or(0));
-    note(&format!(
-        "study {}: {} configurations × {} repetitions (+{} warm-up each) → {}",
-        study.name,
-        configurations.len(),
-        match fewest == most {
-            true => most.to_string(),
-            false => format!("{fewest}–{most}"),
-        },
-        study.warmups,
-        results.display()
-    ));
+        .collect()
+}
 
-    let children = Children {
-        exe: this_exe()?,
-        timeout: study.timeout,
-        // The environment's own setting, if any, wins.
-        mpi_yields_when_idle: options.mpi_yields_when_idle
-            && std::env::var_os(YIELD_WHEN_IDLE).is_none(),
-    };
-    let started_utc = records::utc_now();
-    children.warm_up(
-        &options.programs,
-        &configurations,
-        &scene_files,
-        &warm,
-        study.warmups,
-        &progress,
-    );
-    let mut calibrations = Vec::new();
-    let (mut measured, mut failed) = (0, 0);
-    for (index, &(rep, c)) in todo.iter().enumerate() {
-        if options.calibrate && (index == 0 || todo[index - 1].0 != rep) {
-            progress.set_message(format!("rep {rep}: calibration"));
-            calibrations.push(children.calibrate()?);
+/// One sitting of a study: what all its runs share.
+struct Sitting<'a> {
+    study: &'a Study,
+    configurations: Vec<&'a Configuration>,
+    scene_hashes: Vec<String>,
+    /// The scene file each configuration's process reads.
+    scene_files: Vec<PathBuf>,
+    manifest_hash: String,
+    build_id: String,
+    environment: Environment,
+    started_utc: String,
+    /// The results file the rows go to.
+    results: PathBuf,
+}
+
+impl Sitting<'_> {
+    /// Runs `todo` ((repetition, configuration index) pairs) after the warm-ups, adding
+    /// each row to `rows` (the rows kept from before) and writing them all after each run.
+    fn run(
+        &self,
+        todo: &[(u32, usize)],
+        mut rows: Vec<Record>,
+        options: &RunOptions,
+        quiet: bool,
+        note: &dyn Fn(&str),
+    ) -> anyhow::Result<StudyOutcome> {
+        let kept_note =
+            |rows: &[Record]| interrupted_note(rows, &self.results, &options.continue_with);
+        *interrupt_note() = kept_note(&rows);
+        let kept = rows.len();
+        let warm: BTreeSet<usize> = todo.iter().map(|&(_, c)| c).collect();
+        let n_runs = warm.len() * self.study.warmups as usize + todo.len();
+        let progress = progress_bar(quiet, (options.programs.len() * n_runs) as u64);
+        note(&self.announcement());
+        let children = Children {
+            exe: this_exe()?,
+            timeout: self.study.timeout,
+            // The environment's own setting, if any, wins.
+            mpi_yields_when_idle: options.mpi_yields_when_idle
+                && std::env::var_os(YIELD_WHEN_IDLE).is_none(),
+        };
+        children.warm_up(
+            &options.programs,
+            &self.configurations,
+            &self.scene_files,
+            &warm,
+            self.study.warmups,
+            &progress,
+        );
+        let mut calibrations = Vec::new();
+        let (mut measured, mut failed) = (0, 0);
+        for (index, &(rep, c)) in todo.iter().enumerate() {
+            if options.calibrate && (index == 0 || todo[index - 1].0 != rep) {
+                progress.set_message(format!("rep {rep}: calibration"));
+                calibrations.push(children.calibrate()?);
+            }
+            let key = self.configurations[c].key();
+            progress.set_message(format!("rep {rep}: {key}"));
+            for program in run_order(&options.programs, rep, c) {
+                let record = self.measure(&children, program, rep, c, &key);
+                if record.status == STATUS_OK {
+                    measured += 1;
+                } else {
+                    failed += 1;
+                    progress.suspend(|| eprintln!("run failed: {key}: {}", record.error));
+                }
+                rows.push(record);
+                let mut interrupted = interrupt_note();
+                records::write(&self.results, &rows)?;
+                *interrupted = kept_note(&rows);
+                drop(interrupted);
+                progress.inc(1);
+            }
         }
-        let configuration = configurations[c];
-        let key = configuration.key();
-        progress.set_message(format!("rep {rep}: {key}"));
+        progress.finish_and_clear();
+        if !todo.is_empty() {
+            record_load_at_end(&self.results, &mut rows, kept)?;
+        }
+        Ok(StudyOutcome {
+            results: self.results.clone(),
+            measured,
+            failed,
+            kept,
+            calibrations,
+        })
+    }
+
+    /// What the study is about to do, in one line.
+    fn announcement(&self) -> String {
+        let counts = self.configurations.iter().map(|c| c.repetitions);
+        let (fewest, most) = (counts.clone().min().unwrap_or(0), counts.max().unwrap_or(0));
+        format!(
+            "study {}: {} configurations × {} repetitions (+{} warm-up each) → {}",
+            self.study.name,
+            self.configurations.len(),
+            match fewest == most {
+                true => most.to_string(),
+                false => format!("{fewest}–{most}"),
+            },
+            self.study.warmups,
+            self.results.display()
+        )
+    }
+
+    /// Repetition `rep` of configuration `c` (its key `key`) by `program`: its row.
+    fn measure(
+        &self,
+        children: &Children,
+        program: &Program,
+        rep: u32,
+        c: usize,
+        key: &str,
+    ) -> Record {
+        let configuration = self.configurations[c];
         let context = RecordContext {
-            study: &study.name,
-            manifest_hash: &manifest_hash,
-            build_id: &build_id,
-            config_key: &key,
+            study: &self.study.name,
+            manifest_hash: &self.manifest_hash,
+            build_id: &self.build_id,
+            config_key: key,
             scene: &configuration.scene,
-            scene_hash: &scene_hashes[c],
-            scaling: study.scaling.name(),
+            scene_hash: &self.scene_hashes[c],
+            scaling: self.study.scaling.name(),
             backend: configuration.backend,
             workers: configuration.workers as u64,
             repetition: rep,
-            environment: &environment,
-            study_started_utc: &started_utc,
+            environment: &self.environment,
+            study_started_utc: &self.started_utc,
         };
-        for program in run_order(&options.programs, rep, c) {
-            let record = children.measure(program, configuration, &scene_files[c], &context);
-            if record.status == STATUS_OK {
-                measured += 1;
-            } else {
-                failed += 1;
-                progress.suspend(|| eprintln!("run failed: {key}: {}", record.error));
-            }
-            rows.push(record);
-            let mut interrupted = interrupt_note();
-            records::write(&results, &rows)?;
-            *interrupted = kept_note(&rows);
-            drop(interrupted);
-            progress.inc(1);
-        }
+        children.measure(program, configuration, &self.scene_files[c], &context)
     }
-    progress.finish_and_clear();
-    if !todo.is_empty() {
-        record_load_at_end(&results, &mut rows, kept_ok)?;
-    }
-    Ok(StudyOutcome {
-        results,
-        measured,
-        failed,
-        kept,
-        calibrations,
-    })
 }
 
 /// What makes two runs the same measurement: the configuration (its key), the scene's
