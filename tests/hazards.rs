@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use collide::study::records;
 
-use crate::util::{SCENE, collide, manifest, run_study, scene_file};
+use crate::util::{SCENE, collide, manifest, refused_in, run_study, scene_file};
 
 /// `collide ARGS` run in `dir`, waited for.
 fn collide_in(dir: &Path, args: &[&str]) -> Output {
@@ -282,28 +282,6 @@ fn a_results_folder_with_a_copy_counts_each_run_once_and_refuses_impossible_valu
     );
 }
 
-/// `collide ARGS` in `dir`, which must end within 5 s with exit 2; its stderr.
-fn refused_quickly(dir: &Path, args: &[&str]) -> String {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args(args)
-        .current_dir(dir)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let started = Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        if started.elapsed() > Duration::from_secs(5) {
-            child.kill().unwrap();
-            panic!("{args:?} still ran after 5 s");
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    let out = child.wait_with_output().unwrap();
-    assert_eq!(out.status.code(), Some(2), "{args:?}: {}", stderr(&out));
-    stderr(&out)
-}
-
 #[test]
 fn inputs_without_bound_are_refused_before_anything_is_allocated() {
     let dir = tempfile::tempdir().unwrap();
@@ -313,8 +291,7 @@ fn inputs_without_bound_are_refused_before_anything_is_allocated() {
             true => "",
             false => "\n[backends]\nserial = true",
         };
-        let text =
-            format!("name = \"{name}\"\n{body}{backends}\n[[scenes]]\nfile = \"s.toml\"\n");
+        let text = format!("name = \"{name}\"\n{body}{backends}\n[[scenes]]\nfile = \"s.toml\"\n");
         scene_file(dir.path(), &format!("{name}.toml"), &text)
             .to_str()
             .unwrap()
@@ -344,7 +321,7 @@ fn inputs_without_bound_are_refused_before_anything_is_allocated() {
         ),
     ];
     for (manifest, says) in &cases {
-        let err = refused_quickly(dir.path(), &["run", manifest, "--out", "r"]);
+        let err = refused_in(dir.path(), &["run", manifest, "--out", "r"]);
         assert!(err.contains(says), "{manifest}: {err}");
     }
     let fifo = dir.path().join("fifo.toml");
@@ -354,14 +331,14 @@ fn inputs_without_bound_are_refused_before_anything_is_allocated() {
         vec!["run", "/dev/zero"],
         vec!["simulate", fifo.to_str().unwrap()],
     ] {
-        let err = refused_quickly(dir.path(), &args);
+        let err = refused_in(dir.path(), &args);
         assert!(err.contains("not a regular file"), "{args:?}: {err}");
     }
     // A FIFO named like results in a results folder is passed over, not waited on.
     let results = dir.path().join("results");
     std::fs::create_dir(&results).unwrap();
     make_fifo(&results.join("zz.parquet"));
-    let err = refused_quickly(dir.path(), &["results", "results"]);
+    let err = refused_in(dir.path(), &["results", "results"]);
     assert!(err.contains("named pipe"), "{err}");
 }
 
@@ -442,7 +419,7 @@ fn names_taken_from_file_names_pass_the_name_check() {
             toml::Value::String(file.clone())
         );
         let manifest = scene_file(dir.path(), "m.toml", &text);
-        let err = refused_quickly(
+        let err = refused_in(
             dir.path(),
             &["run", manifest.to_str().unwrap(), "--out", "r"],
         );
@@ -503,18 +480,18 @@ fn bad_values_get_messages_that_say_what_is_wrong_and_where() {
             "a fraction from 0",
         ),
     ] {
-        let err = refused_quickly(dir.path(), &args);
+        let err = refused_in(dir.path(), &args);
         assert!(err.contains(says), "{args:?}: {err}");
         assert!(!err.contains("unexpected argument"), "{args:?}: {err}");
     }
     std::fs::write(dir.path().join("latin1.toml"), b"name = \"caf\xe9\"\n").unwrap();
-    let err = refused_quickly(dir.path(), &["run", "latin1.toml"]);
+    let err = refused_in(dir.path(), &["run", "latin1.toml"]);
     assert!(err.contains("not UTF-8"), "{err}");
 
     let manifest = manifest(dir.path(), "repetitions = 1\n[backends]\nserial = true");
     std::os::unix::fs::symlink("nowhere", dir.path().join("dangling")).unwrap();
     for flag in ["--out", "--reports"] {
-        let err = refused_quickly(dir.path(), &["run", &manifest, flag, "dangling"]);
+        let err = refused_in(dir.path(), &["run", &manifest, flag, "dangling"]);
         assert!(err.contains("which does not exist"), "{flag}: {err}");
     }
     assert!(!dir.path().join("results").exists(), "a run started anyway");
@@ -524,7 +501,7 @@ fn bad_values_get_messages_that_say_what_is_wrong_and_where() {
         "crowded.toml",
         "[scene]\nn = 100\nsize = [1.0, 1.0]\n[method]\ndt = 0.1\nsteps = 5\n",
     );
-    let err = refused_quickly(dir.path(), &["simulate", crowded.to_str().unwrap()]);
+    let err = refused_in(dir.path(), &["simulate", crowded.to_str().unwrap()]);
     assert!(err.contains("crowded.toml:3"), "{err}");
     assert!(!err.contains("placement = \"lattice\""), "{err}");
 

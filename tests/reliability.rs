@@ -4,8 +4,7 @@
 //! written. Each bad input is refused with exit 2 before anything runs, or recovered.
 
 use std::path::Path;
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::process::Stdio;
 
 use collide::run::backend_kind::BackendKind;
 use collide::run::limits::{MAX_WORKERS_PER_CPU, Machine};
@@ -13,7 +12,7 @@ use collide::study::records;
 use rustix::process::Signal;
 
 use crate::util::{
-    SCENE, collide, interrupt_after_first_row, run_study, scene_file, study_command,
+    SCENE, collide, interrupt_after_first_row, refused_in, run_study, scene_file, study_command,
 };
 
 /// An inline scene entry named `name` (TOML-escaped by the caller).
@@ -24,30 +23,9 @@ fn inline_scene(name: &str) -> String {
     )
 }
 
-/// Runs `collide ARGS`, which must fail with exit 2 within a few seconds; its stderr.
-/// A run that is still going then is killed first: a bad input that is accepted (say
-/// n = 10⁹) must not go on to fill the machine.
+/// Runs `collide ARGS` from the crate folder, which must be refused: see [`refused_in`].
 fn refused(args: &[&str]) -> String {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_collide"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let started = Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        if started.elapsed() > Duration::from_secs(5) {
-            child.kill().unwrap();
-            child.wait().unwrap();
-            panic!("{args:?} was still running after 5 s");
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    let out = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8(out.stderr).unwrap();
-    assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
-    stderr
+    refused_in(Path::new(env!("CARGO_MANIFEST_DIR")), args)
 }
 
 /// `collide run MANIFEST --out OUT`, which must be refused; its stderr.

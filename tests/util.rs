@@ -14,6 +14,32 @@ use collide::study::records::{self, Record, RecordContext, STATUS_TIMED_OUT};
 pub const SCENE: &str =
     "[scene]\nn = 200\npacking = 0.1\nseed = 3\n[method]\ndt = 0.1\nsteps = 20\n";
 
+/// Runs `collide ARGS` in `dir`, which must fail with exit 2 within 5 s; its stderr. A
+/// run still going then is killed first: a bad input that is accepted (say n = 10⁹) must
+/// not go on to fill the machine.
+pub fn refused_in(dir: &Path, args: &[&str]) -> String {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_collide"))
+        .args(args)
+        .current_dir(dir)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed() > Duration::from_secs(5) {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            panic!("{args:?} was still running after 5 s");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+    stderr
+}
+
 /// Runs the `collide` binary from the crate folder and waits for its output.
 pub fn collide(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_collide"))
