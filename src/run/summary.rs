@@ -191,6 +191,19 @@ impl RunSummary {
 
 impl fmt::Display for RunSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.write_scene(f)?;
+        self.write_workers_and_times(f)?;
+        self.write_messages(f)?;
+        self.write_conservation(f)?;
+        self.write_method_and_accuracy(f)?;
+        write!(f, "state hash {}", self.state_hash)
+    }
+}
+
+/// The human-readable form, one group of lines per step of `fmt`.
+impl RunSummary {
+    /// The scene and the stepping asked for: disks, boundary, seed, steps, dt, search.
+    fn write_scene(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let dt_rule = self.dt_auto_fraction.map_or_else(String::new, |fraction| {
             format!(" (auto: the fastest disk moves {fraction}·r_min per step)")
         });
@@ -202,11 +215,6 @@ impl fmt::Display for RunSummary {
             "{} disks, {} boundary, packing {:.4}, {seed}",
             self.n, self.boundary, self.packing
         )?;
-        let oversubscribed = if self.oversubscribed {
-            " (oversubscribed: more workers than cores)"
-        } else {
-            ""
-        };
         let search = match self.method.as_str() {
             "event" => "exact event times (no broad phase)".to_owned(),
             _ => format!("{} broad phase", self.broadphase),
@@ -215,7 +223,16 @@ impl fmt::Display for RunSummary {
             f,
             "{} steps of dt = {:.6e}{dt_rule}, {search}",
             self.steps, self.dt
-        )?;
+        )
+    }
+
+    /// Where the run ran and where its time went.
+    fn write_workers_and_times(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let oversubscribed = if self.oversubscribed {
+            " (oversubscribed: more workers than cores)"
+        } else {
+            ""
+        };
         writeln!(
             f,
             "backend    {}, {} thread(s) × {} rank(s){oversubscribed}",
@@ -236,7 +253,11 @@ impl fmt::Display for RunSummary {
             f,
             "stages     {:.4} s integration, {:.4} s broad phase, {:.4} s collisions, {:.4} s communication",
             self.integration_s, self.broad_phase_s, self.collision_s, self.communication_s
-        )?;
+        )
+    }
+
+    /// Message traffic per rank per step, when the run recorded it.
+    fn write_messages(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         if let (
             Some(messages),
             Some(messages_max),
@@ -256,6 +277,11 @@ impl fmt::Display for RunSummary {
                  {bytes:.0} bytes (most {bytes_max:.0}), {collectives:.2} collectives"
             )?;
         }
+        Ok(())
+    }
+
+    /// Energy, momentum and collision counts: what a correct step conserves or bounds.
+    fn write_conservation(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let relative_change = (self.kinetic_energy_final - self.kinetic_energy_initial)
             / self.kinetic_energy_initial.abs().max(f64::MIN_POSITIVE);
         writeln!(
@@ -279,7 +305,11 @@ impl fmt::Display for RunSummary {
             self.wall_collisions,
             100.0 * self.max_overlap,
             100.0 * self.max_wall_penetration
-        )?;
+        )
+    }
+
+    /// The method, its accuracy measures, the collapse guard and any automatic choice.
+    fn write_method_and_accuracy(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let show =
             |value: Option<f64>| value.map_or_else(|| "n/a".to_owned(), |v| format!("{v:.4e}"));
         let count = |value: Option<u64>| value.map_or_else(|| "n/a".to_owned(), |v| v.to_string());
@@ -317,6 +347,6 @@ impl fmt::Display for RunSummary {
         if let Some(choice) = &self.choice {
             writeln!(f, "chosen     {choice}")?;
         }
-        write!(f, "state hash {}", self.state_hash)
+        Ok(())
     }
 }
