@@ -121,127 +121,165 @@ fn within(value: f64, limit: f64) -> bool {
 /// its range, if any.
 pub fn check(scene: &SceneSource, method: &MethodSpec) -> Option<Violation> {
     let d = derive(scene);
-    let violation = |field, problem: String, fix| {
-        Some(Violation {
-            field,
-            problem,
-            fix,
+    d.box_violation()
+        .or_else(|| d.mass_violation())
+        .or_else(|| d.energy_violation())
+        .or_else(|| d.collision_time_violation())
+        .or_else(|| {
+            // A chosen dt ("auto") follows from these quantities; a given one is checked.
+            let DtChoice::Fixed(dt) = method.dt else {
+                return None;
+            };
+            d.step_violation(dt)
         })
-    };
-    let (box_field, box_fix) = match (d.listed, d.sized) {
-        (true, _) => (
-            Field::Particles,
-            "give radii and a box of comparable scales",
-        ),
-        (false, true) => (Field::Size, "give a box and radii of comparable scales"),
-        (false, false) => (
-            Field::Radius,
-            "give radii of ordinary size, e.g. radius = 1.0 (scale the box through packing)",
-        ),
-    };
-    if !(d.box_area.is_finite() && d.box_area > 0.0 && d.box_side.is_finite()) {
-        return violation(
-            box_field,
-            format!(
-                "makes a box of area {:e}, which is not a finite positive number",
-                d.box_area
+}
+
+fn violation(field: Field, problem: String, fix: &'static str) -> Option<Violation> {
+    Some(Violation {
+        field,
+        problem,
+        fix,
+    })
+}
+
+impl Derived {
+    /// The box: finite, positive, and few enough radii across for positions to resolve a disk.
+    fn box_violation(&self) -> Option<Violation> {
+        let (box_field, box_fix) = match (self.listed, self.sized) {
+            (true, _) => (
+                Field::Particles,
+                "give radii and a box of comparable scales",
             ),
-            box_fix,
-        );
-    }
-    let box_in_radii = d.box_side / d.min_radius;
-    if !within(box_in_radii, MAX_BOX_IN_RADII) {
-        return violation(
-            box_field,
-            format!(
-                "makes a box {box_in_radii:e} radii across, more than the {MAX_BOX_IN_RADII:e} \
-                 within which positions resolve a disk"
+            (false, true) => (Field::Size, "give a box and radii of comparable scales"),
+            (false, false) => (
+                Field::Radius,
+                "give radii of ordinary size, e.g. radius = 1.0 (scale the box through packing)",
             ),
-            box_fix,
-        );
-    }
-    if !d.min_mass.is_normal() {
-        let field = if d.listed {
-            Field::Particles
-        } else {
-            Field::Mass
         };
-        return violation(
-            field,
-            format!(
-                "makes a disk of mass {:e}, below the {:e} where f64 keeps its precision",
-                d.min_mass,
-                f64::MIN_POSITIVE
-            ),
-            "give masses of ordinary size, e.g. mass = 1.0, or mass = \"area\"",
-        );
-    }
-    if !d.kinetic_energy.is_finite() {
-        let field = match (d.listed, (d.n * d.speed_rms * d.speed_rms).is_finite()) {
-            (true, _) => Field::Particles,
-            (false, true) => Field::Mass,
-            (false, false) => Field::SpeedRms,
-        };
-        return violation(
-            field,
-            format!(
-                "makes a kinetic energy of {:e}, not a finite number",
-                d.kinetic_energy
-            ),
-            "give speeds and masses whose ½·n·m·v² is a finite number, e.g. speed_rms = 1.0",
-        );
-    }
-    if d.speed_rms > 0.0 {
-        // The time a disk takes to move one radius: the scale of the collision times.
-        let collision_time = d.min_radius / d.speed_rms;
-        if !(collision_time.is_finite() && collision_time > 0.0) {
+        if !(self.box_area.is_finite() && self.box_area > 0.0 && self.box_side.is_finite()) {
             return violation(
-                Field::SpeedRms,
+                box_field,
                 format!(
-                    "makes the time to move one radius {collision_time:e}, not a finite \
-                     positive number"
+                    "makes a box of area {:e}, which is not a finite positive number",
+                    self.box_area
                 ),
-                "give a speed of the order of radii per unit time, e.g. speed_rms = 1.0",
+                box_fix,
             );
         }
+        let box_in_radii = self.box_side / self.min_radius;
+        if !within(box_in_radii, MAX_BOX_IN_RADII) {
+            return violation(
+                box_field,
+                format!(
+                    "makes a box {box_in_radii:e} radii across, more than the {MAX_BOX_IN_RADII:e} \
+                     within which positions resolve a disk"
+                ),
+                box_fix,
+            );
+        }
+        None
     }
-    // A chosen dt ("auto") follows from these quantities; a given one is checked.
-    let DtChoice::Fixed(dt) = method.dt else {
-        return None;
-    };
-    let fall = 0.5 * d.gravity * dt * dt / d.min_radius;
-    if !within(fall, MAX_STEP_IN_RADII) {
-        return violation(
-            Field::Gravity,
-            format!(
-                "makes a disk fall {fall:e} radii in one step of dt = {dt}, more than \
-                 {MAX_STEP_IN_RADII:e}"
-            ),
-            "give a weaker field or a smaller dt",
-        );
+
+    /// The lightest disk: a normal f64.
+    fn mass_violation(&self) -> Option<Violation> {
+        if !self.min_mass.is_normal() {
+            let field = if self.listed {
+                Field::Particles
+            } else {
+                Field::Mass
+            };
+            return violation(
+                field,
+                format!(
+                    "makes a disk of mass {:e}, below the {:e} where f64 keeps its precision",
+                    self.min_mass,
+                    f64::MIN_POSITIVE
+                ),
+                "give masses of ordinary size, e.g. mass = 1.0, or mass = \"area\"",
+            );
+        }
+        None
     }
-    let step = d.speed_rms * dt;
-    let step_in_radii = step / d.min_radius;
-    if !within(step_in_radii, MAX_STEP_IN_RADII) {
-        return violation(
-            Field::Dt,
-            format!(
-                "makes the rms disk move {step_in_radii:e} radii per step, more than \
-                 {MAX_STEP_IN_RADII:e}"
-            ),
-            "give a smaller dt (dt = \"auto\" chooses one), or a lower speed_rms",
-        );
+
+    /// The kinetic energy: finite.
+    fn energy_violation(&self) -> Option<Violation> {
+        if !self.kinetic_energy.is_finite() {
+            let field = match (
+                self.listed,
+                (self.n * self.speed_rms * self.speed_rms).is_finite(),
+            ) {
+                (true, _) => Field::Particles,
+                (false, true) => Field::Mass,
+                (false, false) => Field::SpeedRms,
+            };
+            return violation(
+                field,
+                format!(
+                    "makes a kinetic energy of {:e}, not a finite number",
+                    self.kinetic_energy
+                ),
+                "give speeds and masses whose ½·n·m·v² is a finite number, e.g. speed_rms = 1.0",
+            );
+        }
+        None
     }
-    if d.speed_rms > 0.0 && step < MIN_STEP_IN_BOX * d.box_side {
-        return violation(
-            Field::Dt,
-            format!(
-                "makes the rms disk move {:e} of the box per step, less than the {MIN_STEP_IN_BOX:e} \
-                 positions resolve: the disks would not move",
-                step / d.box_side
-            ),
-            "give a larger dt (dt = \"auto\" chooses one), or a higher speed_rms",
-        );
+
+    /// The collision time scale of a moving gas: finite and positive.
+    fn collision_time_violation(&self) -> Option<Violation> {
+        if self.speed_rms > 0.0 {
+            // The time a disk takes to move one radius: the scale of the collision times.
+            let collision_time = self.min_radius / self.speed_rms;
+            if !(collision_time.is_finite() && collision_time > 0.0) {
+                return violation(
+                    Field::SpeedRms,
+                    format!(
+                        "makes the time to move one radius {collision_time:e}, not a finite \
+                         positive number"
+                    ),
+                    "give a speed of the order of radii per unit time, e.g. speed_rms = 1.0",
+                );
+            }
+        }
+        None
     }
-    None
+
+    /// How far a disk falls and moves in one given step `dt`: far enough to move at all,
+    /// not so far that it skips over its neighbours.
+    fn step_violation(&self, dt: f64) -> Option<Violation> {
+        let fall = 0.5 * self.gravity * dt * dt / self.min_radius;
+        if !within(fall, MAX_STEP_IN_RADII) {
+            return violation(
+                Field::Gravity,
+                format!(
+                    "makes a disk fall {fall:e} radii in one step of dt = {dt}, more than \
+                     {MAX_STEP_IN_RADII:e}"
+                ),
+                "give a weaker field or a smaller dt",
+            );
+        }
+        let step = self.speed_rms * dt;
+        let step_in_radii = step / self.min_radius;
+        if !within(step_in_radii, MAX_STEP_IN_RADII) {
+            return violation(
+                Field::Dt,
+                format!(
+                    "makes the rms disk move {step_in_radii:e} radii per step, more than \
+                     {MAX_STEP_IN_RADII:e}"
+                ),
+                "give a smaller dt (dt = \"auto\" chooses one), or a lower speed_rms",
+            );
+        }
+        if self.speed_rms > 0.0 && step < MIN_STEP_IN_BOX * self.box_side {
+            return violation(
+                Field::Dt,
+                format!(
+                    "makes the rms disk move {:e} of the box per step, less than the {MIN_STEP_IN_BOX:e} \
+                     positions resolve: the disks would not move",
+                    step / self.box_side
+                ),
+                "give a larger dt (dt = \"auto\" chooses one), or a higher speed_rms",
+            );
+        }
+        None
+    }
 }
