@@ -345,6 +345,19 @@ fn seconds_table(out: &mut String, setup: &Setup) {
 /// count, what each speedup is against, and the Amdahl fits.
 fn speedup_table(out: &mut String, setup: &Setup) {
     let _ = writeln!(out, "### Speedup, efficiency and FPS\n");
+    speedup_baselines(out, setup);
+    // What the busiest rank sent, beside the timings, where any MPI run counted it.
+    let sent =
+        (setup.backends.iter()).any(|b| b.points.iter().any(|p| p.messages_per_step.is_finite()));
+    speedup_rows(out, setup, sent);
+    // A blank line ends the table, whatever follows it.
+    let _ = writeln!(out);
+    speedup_notes(out, setup, sent);
+}
+
+/// What each backend's speedup is measured against, and for weak scaling what the
+/// measures mean.
+fn speedup_baselines(out: &mut String, setup: &Setup) {
     if setup.scaling == Scaling::Weak {
         let _ = writeln!(
             out,
@@ -367,14 +380,16 @@ fn speedup_table(out: &mut String, setup: &Setup) {
             backend.backend
         );
     }
+}
+
+/// The table: one row per backend and worker count, with frames/s with drawing and
+/// the busiest rank's messages where the runs have them (`sent`).
+fn speedup_rows(out: &mut String, setup: &Setup, sent: bool) {
     let (drawn_header, drawn_rule) = if setup.drawn {
         (" frames/s with drawing |", " ---: |")
     } else {
         ("", "")
     };
-    // What the busiest rank sent, beside the timings, where any MPI run counted it.
-    let sent =
-        (setup.backends.iter()).any(|b| b.points.iter().any(|p| p.messages_per_step.is_finite()));
     let (sent_header, sent_rule) = if sent {
         (" messages/step | KiB/step |", " ---: | ---: |")
     } else {
@@ -413,20 +428,10 @@ fn speedup_table(out: &mut String, setup: &Setup) {
             );
         }
     }
-    let fits: Vec<String> = setup
-        .backends
-        .iter()
-        .filter_map(|b| {
-            b.amdahl.map(|fit| {
-                format!(
-                    "{}: f = {:.3} (R² = {:.3})",
-                    b.backend, fit.serial_fraction, fit.r_squared
-                )
-            })
-        })
-        .collect();
-    // A blank line ends the table, whatever follows it.
-    let _ = writeln!(out);
+}
+
+/// What the optional columns count, and the Amdahl fits.
+fn speedup_notes(out: &mut String, setup: &Setup, sent: bool) {
     if sent {
         let _ = writeln!(
             out,
@@ -444,6 +449,18 @@ fn speedup_table(out: &mut String, setup: &Setup) {
              `fps-drawing` figure).\n"
         );
     }
+    let fits: Vec<String> = setup
+        .backends
+        .iter()
+        .filter_map(|b| {
+            b.amdahl.map(|fit| {
+                format!(
+                    "{}: f = {:.3} (R² = {:.3})",
+                    b.backend, fit.serial_fraction, fit.r_squared
+                )
+            })
+        })
+        .collect();
     if !fits.is_empty() {
         let _ = writeln!(
             out,
