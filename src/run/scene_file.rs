@@ -228,63 +228,8 @@ impl Validator<'_> {
         let method = self
             .pick("--method", overrides.method, &raw.method, |m| *m)
             .map_or(MethodChoice::Fixed(Method::Step), |sourced| sourced.value);
-        let missed_tolerance = match self.in_file(&raw.missed_tolerance) {
-            Some(Sourced { value, origin }) if !(value > 0.0 && value < 1.0) => {
-                return Err(self.invalid(
-                    origin,
-                    "method.missed_tolerance",
-                    format!("is {value}, outside (0, 1)"),
-                    "give the largest fraction of missed collisions method = \"auto\" and \
-                     dt = \"auto\" may accept, e.g. missed_tolerance = 1e-3",
-                ));
-            }
-            sourced => sourced.map_or(DEFAULT_MISSED_TOLERANCE, |s| s.value),
-        };
-        // dt = "auto" follows the dt_fraction rule where dt_fraction is given, else the
-        // tolerance; an absent dt is the dt_fraction rule unless the method is auto.
-        let tolerance_or = |fraction: Option<f64>| {
-            fraction.map_or(DtChoice::Tolerance, |fraction| DtChoice::Auto { fraction })
-        };
-        let explicit_fraction = match self.in_file(&raw.dt_fraction) {
-            Some(Sourced { value, origin }) => {
-                if !(value > 0.0 && value <= 1.0) {
-                    return Err(self.invalid(
-                        origin,
-                        "method.dt_fraction",
-                        format!("is {value}, outside (0, 1]"),
-                        "give the largest step as a fraction of the smallest radius, e.g. dt_fraction = 0.1",
-                    ));
-                }
-                Some(value)
-            }
-            None => None,
-        };
-        let dt = match self.pick("--dt", overrides.dt.clone(), &raw.dt, Clone::clone) {
-            None if method == MethodChoice::Auto => tolerance_or(explicit_fraction),
-            None => DtChoice::Auto {
-                fraction: explicit_fraction.unwrap_or(DEFAULT_DT_FRACTION),
-            },
-            Some(Sourced { value, origin }) => match value {
-                DtValue::Word(word) if word == "auto" => tolerance_or(explicit_fraction),
-                DtValue::Seconds(dt) if dt > 0.0 && dt.is_finite() => DtChoice::Fixed(dt),
-                DtValue::Seconds(dt) => {
-                    return Err(self.invalid(
-                        origin,
-                        "method.dt",
-                        format!("is {dt}, not a positive number"),
-                        "give a positive time step, e.g. dt = 0.01, or dt = \"auto\"",
-                    ));
-                }
-                DtValue::Word(word) => {
-                    return Err(self.invalid(
-                        origin,
-                        "method.dt",
-                        format!("is \"{word}\""),
-                        "give a positive number or \"auto\"",
-                    ));
-                }
-            },
-        };
+        let missed_tolerance = self.missed_tolerance(raw)?;
+        let dt = self.dt(raw, overrides, method)?;
         let steps = self.count(
             self.pick("--steps", overrides.steps, &raw.steps, |s| *s),
             "method.steps",
@@ -300,17 +245,7 @@ impl Validator<'_> {
         let observe = self
             .pick("--observe", overrides.observe, &raw.observe, |o| *o)
             .map_or(Observe::Timing, |sourced| sourced.value);
-        let tc = match self.pick("--tc", overrides.tc, &raw.tc, |t| *t) {
-            Some(Sourced { value, origin }) if !(value >= 0.0 && value.is_finite()) => {
-                return Err(self.invalid(
-                    origin,
-                    "method.tc",
-                    format!("is {value}, not a time ≥ 0"),
-                    "give the TC model time of the event method, e.g. tc = 1e-5 (0 turns the guard off)",
-                ));
-            }
-            sourced => sourced.map(|s| s.value),
-        };
+        let tc = self.tc(raw, overrides)?;
         Ok(MethodSpec {
             dt,
             steps,
@@ -321,6 +256,91 @@ impl Validator<'_> {
             observe,
             draw: overrides.draw.unwrap_or(false),
         })
+    }
+
+    fn missed_tolerance(&self, raw: &RawMethod) -> Result<f64, SceneFileError> {
+        match self.in_file(&raw.missed_tolerance) {
+            Some(Sourced { value, origin }) if !(value > 0.0 && value < 1.0) => Err(self.invalid(
+                origin,
+                "method.missed_tolerance",
+                format!("is {value}, outside (0, 1)"),
+                "give the largest fraction of missed collisions method = \"auto\" and \
+                     dt = \"auto\" may accept, e.g. missed_tolerance = 1e-3",
+            )),
+            sourced => Ok(sourced.map_or(DEFAULT_MISSED_TOLERANCE, |s| s.value)),
+        }
+    }
+
+    /// The time step: given, or a rule that chooses it (see `DtChoice`).
+    fn dt(
+        &self,
+        raw: &RawMethod,
+        overrides: &Overrides,
+        method: MethodChoice,
+    ) -> Result<DtChoice, SceneFileError> {
+        // dt = "auto" follows the dt_fraction rule where dt_fraction is given, else the
+        // tolerance; an absent dt is the dt_fraction rule unless the method is auto.
+        let tolerance_or = |fraction: Option<f64>| {
+            fraction.map_or(DtChoice::Tolerance, |fraction| DtChoice::Auto { fraction })
+        };
+        let explicit_fraction = self.dt_fraction(raw)?;
+        let Some(Sourced { value, origin }) =
+            self.pick("--dt", overrides.dt.clone(), &raw.dt, Clone::clone)
+        else {
+            return Ok(if method == MethodChoice::Auto {
+                tolerance_or(explicit_fraction)
+            } else {
+                DtChoice::Auto {
+                    fraction: explicit_fraction.unwrap_or(DEFAULT_DT_FRACTION),
+                }
+            });
+        };
+        match value {
+            DtValue::Word(word) if word == "auto" => Ok(tolerance_or(explicit_fraction)),
+            DtValue::Seconds(dt) if dt > 0.0 && dt.is_finite() => Ok(DtChoice::Fixed(dt)),
+            DtValue::Seconds(dt) => Err(self.invalid(
+                origin,
+                "method.dt",
+                format!("is {dt}, not a positive number"),
+                "give a positive time step, e.g. dt = 0.01, or dt = \"auto\"",
+            )),
+            DtValue::Word(word) => Err(self.invalid(
+                origin,
+                "method.dt",
+                format!("is \"{word}\""),
+                "give a positive number or \"auto\"",
+            )),
+        }
+    }
+
+    fn dt_fraction(&self, raw: &RawMethod) -> Result<Option<f64>, SceneFileError> {
+        let Some(Sourced { value, origin }) = self.in_file(&raw.dt_fraction) else {
+            return Ok(None);
+        };
+        if !(value > 0.0 && value <= 1.0) {
+            return Err(self.invalid(
+                origin,
+                "method.dt_fraction",
+                format!("is {value}, outside (0, 1]"),
+                "give the largest step as a fraction of the smallest radius, e.g. dt_fraction = 0.1",
+            ));
+        }
+        Ok(Some(value))
+    }
+
+    /// The TC model time of the event method, if given.
+    fn tc(&self, raw: &RawMethod, overrides: &Overrides) -> Result<Option<f64>, SceneFileError> {
+        match self.pick("--tc", overrides.tc, &raw.tc, |t| *t) {
+            Some(Sourced { value, origin }) if !(value >= 0.0 && value.is_finite()) => {
+                Err(self.invalid(
+                    origin,
+                    "method.tc",
+                    format!("is {value}, not a time ≥ 0"),
+                    "give the TC model time of the event method, e.g. tc = 1e-5 (0 turns the guard off)",
+                ))
+            }
+            sourced => Ok(sourced.map(|s| s.value)),
+        }
     }
 
     /// What a method cannot do with a scene: the event method flies straight lines, so
