@@ -21,7 +21,7 @@ use crate::backend::comm::RankTraffic;
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::{InjectedSlowdown, Method, PreparedRun};
 use crate::run::summary::RunSummary;
-use crate::sim::observe::{Observables, observe, state_hash, thermodynamics};
+use crate::sim::observe::{Observables, Thermodynamics, observe, state_hash, thermodynamics};
 use crate::sim::scene::PlacementError;
 use crate::sim::{Particles, StepCounters};
 pub use crate::system::machine::{CpuScope, timed};
@@ -204,42 +204,14 @@ pub fn summarize(
     measured: &Measured,
     last: &Particles,
 ) -> RunSummary {
-    let n = last.len();
+    let outcome = Outcome::of(prepared, measured, last);
+    let (steps, wall_s) = (outcome.steps, measured.wall_s);
     let accuracy = &measured.accuracy;
-    // A collapse ends the run early: the steps done, and the time the state reached.
-    let (steps, duration) = match accuracy.collapse {
-        Some(collapse) => (collapse.steps, collapse.time),
-        None => (prepared.steps, prepared.steps as f64 * prepared.params.dt),
-    };
-    let wall_s = measured.wall_s;
-    let final_observables = observe(last);
-    let cores = usable_cpus();
     let counters = &measured.counters;
-    let scene = &prepared.scene;
-    let physics = &scene.physics;
-    let n_f = n.max(1) as f64;
-    let thermo = thermodynamics(
-        n,
-        scene.domain.area(),
-        duration,
-        counters.virial,
-        accuracy.temperature_curve.as_deref(),
-        [
-            measured.initial.kinetic_energy,
-            final_observables.kinetic_energy,
-        ],
-    );
-    let elastic = physics.is_elastic();
-    let is_event = prepared.method == Method::Event;
     let per_step = |total: f64| (steps > 0).then(|| total / steps as f64);
     let traffic = measured.traffic.as_ref();
-    let missed = if is_event {
-        Some(0)
-    } else {
-        accuracy.missed_collisions
-    };
     RunSummary {
-        n,
+        n: outcome.n,
         steps,
         dt: prepared.params.dt,
         dt_auto_fraction: prepared.dt_auto_fraction,
@@ -247,7 +219,7 @@ pub fn summarize(
         workers: workers.threads * workers.ranks,
         threads: workers.threads,
         ranks: workers.ranks,
-        oversubscribed: workers.threads * workers.ranks > cores,
+        oversubscribed: workers.threads * workers.ranks > usable_cpus(),
         boundary: prepared.scene.domain.boundary.name().to_owned(),
         broadphase: prepared.params.broadphase.name().to_owned(),
         packing: prepared.initial.packing,
@@ -260,7 +232,7 @@ pub fn summarize(
         fps_with_drawing: measured
             .draw_s
             .map(|draw_s| steps as f64 / (wall_s + draw_s)),
-        particle_steps_per_s: (n as f64 * steps as f64) / wall_s,
+        particle_steps_per_s: (outcome.n as f64 * steps as f64) / wall_s,
         integration_s: measured.stages.integration,
         broad_phase_s: measured.stages.broad_phase,
         collision_s: measured.stages.collisions,
@@ -271,9 +243,9 @@ pub fn summarize(
         bytes_per_step_mean: traffic.and_then(|t| per_step(t.bytes_mean)),
         collectives_per_step: traffic.and_then(|t| per_step(t.collectives as f64)),
         kinetic_energy_initial: measured.initial.kinetic_energy,
-        kinetic_energy_final: final_observables.kinetic_energy,
+        kinetic_energy_final: outcome.last.kinetic_energy,
         momentum_initial: measured.initial.momentum,
-        momentum_final: final_observables.momentum,
+        momentum_final: outcome.last.momentum,
         pair_collisions: measured.counters.pair_collisions,
         wall_collisions: measured.counters.wall_collisions,
         max_overlap: measured.counters.max_overlap,
@@ -281,38 +253,97 @@ pub fn summarize(
         state_hash: state_hash(last),
         method: prepared.method.name().to_owned(),
         observe: prepared.observe.name().to_owned(),
-        events_per_s: is_event
+        events_per_s: outcome
+            .is_event
             .then(|| (counters.pair_collisions + counters.wall_collisions) as f64 / wall_s),
-        collision_rate: Some(2.0 * counters.pair_collisions as f64 / (n_f * duration)),
-        temperature: Some(thermo.temperature),
-        pressure: Some(thermo.pressure),
-        compressibility_z: thermo.compressibility_z,
-        missed_collisions: missed,
-        missed_collision_fraction: missed
-            .filter(|m| m + counters.pair_collisions > 0)
-            .map(|m| m as f64 / (m + counters.pair_collisions) as f64),
+        collision_rate: Some(
+            2.0 * counters.pair_collisions as f64 / (outcome.n.max(1) as f64 * outcome.duration),
+        ),
+        temperature: Some(outcome.thermo.temperature),
+        pressure: Some(outcome.thermo.pressure),
+        compressibility_z: outcome.thermo.compressibility_z,
+        missed_collisions: outcome.missed,
+        missed_collision_fraction: missed_fraction(outcome.missed, counters.pair_collisions),
         mean_overlap: (counters.pair_collisions > 0)
             .then(|| counters.overlap_sum / counters.pair_collisions as f64),
-        energy_relative_error: (elastic && measured.initial.kinetic_energy > 0.0).then(|| {
-            (final_observables.kinetic_energy - measured.initial.kinetic_energy)
-                / measured.initial.kinetic_energy
-        }),
-        collapse_guard_fired: accuracy
-            .collapse_guard
-            .filter(|_| physics.restitution < 1.0)
-            .map(|(fired, _)| fired),
-        collapse_tc: accuracy
-            .collapse_guard
-            .filter(|_| physics.restitution < 1.0)
-            .map(|(_, tc)| tc),
+        energy_relative_error: outcome.energy_relative_error,
+        collapse_guard_fired: outcome.collapse_guard.map(|(fired, _)| fired),
+        collapse_tc: outcome.collapse_guard.map(|(_, tc)| tc),
         collapse_time: accuracy.collapse.map(|collapse| collapse.time),
-        time_reached: Some(duration),
-        tc: is_event.then_some(prepared.event.tc),
+        time_reached: Some(outcome.duration),
+        tc: outcome.is_event.then_some(prepared.event.tc),
         temperature_curve: accuracy.temperature_curve.clone(),
-        rms_step_over_radius: {
-            let step = prepared.initial.rms_speed * prepared.params.dt;
-            (step > 0.0).then(|| step / prepared.initial.min_radius)
-        },
+        rms_step_over_radius: rms_step_over_radius(prepared),
         choice: prepared.choice.clone(),
     }
+}
+
+/// What a finished run reached, derived once for the summary's fields.
+struct Outcome {
+    n: usize,
+    /// Steps done: as asked, or fewer where a detected collapse ended the run early.
+    steps: u64,
+    /// The simulated time the state reached.
+    duration: f64,
+    last: Observables,
+    thermo: Thermodynamics,
+    is_event: bool,
+    missed: Option<u64>,
+    /// Collisions the TC guard made elastic, and its time.
+    collapse_guard: Option<(u64, f64)>,
+    energy_relative_error: Option<f64>,
+}
+
+impl Outcome {
+    fn of(prepared: &PreparedRun, measured: &Measured, last: &Particles) -> Outcome {
+        let n = last.len();
+        let accuracy = &measured.accuracy;
+        let (steps, duration) = match accuracy.collapse {
+            Some(collapse) => (collapse.steps, collapse.time),
+            None => (prepared.steps, prepared.steps as f64 * prepared.params.dt),
+        };
+        let last = observe(last);
+        let initial_energy = measured.initial.kinetic_energy;
+        let physics = &prepared.scene.physics;
+        let thermo = thermodynamics(
+            n,
+            prepared.scene.domain.area(),
+            duration,
+            measured.counters.virial,
+            accuracy.temperature_curve.as_deref(),
+            [initial_energy, last.kinetic_energy],
+        );
+        let is_event = prepared.method == Method::Event;
+        Outcome {
+            n,
+            steps,
+            duration,
+            thermo,
+            is_event,
+            // The event method finds every collision: it misses none by construction.
+            missed: is_event.then_some(0).or(accuracy.missed_collisions),
+            // The TC guard matters only where collisions lose energy.
+            collapse_guard: accuracy
+                .collapse_guard
+                .filter(|_| physics.restitution < 1.0),
+            // Only an elastic scene should conserve its energy.
+            energy_relative_error: (physics.is_elastic() && initial_energy > 0.0)
+                .then(|| (last.kinetic_energy - initial_energy) / initial_energy),
+            last,
+        }
+    }
+}
+
+/// Missed collisions as a fraction of all that should have happened; `None` when
+/// unknown or when there were none.
+fn missed_fraction(missed: Option<u64>, pair_collisions: u64) -> Option<f64> {
+    missed
+        .filter(|m| m + pair_collisions > 0)
+        .map(|m| m as f64 / (m + pair_collisions) as f64)
+}
+
+/// How far the rms disk moves per step, in smallest radii; `None` for a state at rest.
+fn rms_step_over_radius(prepared: &PreparedRun) -> Option<f64> {
+    let step = prepared.initial.rms_speed * prepared.params.dt;
+    (step > 0.0).then(|| step / prepared.initial.min_radius)
 }
