@@ -32,13 +32,14 @@ use crate::sim::grid::{
     sort_movers,
 };
 use crate::sim::neighbours::{PairList, Skin, larger, with_reorder_scratch};
-use crate::sim::observe::observe;
+use crate::sim::observe::{Observables, observe};
 use crate::sim::particles::{PACKED_LEN, SPARE_SHARE};
 use crate::sim::pieces::InTurn;
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::{ContactSchedule, DiskSet};
 use crate::sim::step::{ReorderSchedule, advance_disks};
 use crate::sim::{Boundary, Particles, StepCounters};
+use crate::system::machine::LoopSeconds;
 
 /// Runs `spec` on every rank of `comm` (all ranks call this together). Rank 0 returns
 /// the summary and the whole final state; the other ranks return `None`.
@@ -74,9 +75,39 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         rank.particles.pack(idx, &mut mine);
     }
     let states = comm.all_gather(&mine);
+    let figures = rank_figures(&rank, &seconds, &sent);
+    let all_figures = comm.all_gather(&figures);
+    if comm.rank() != 0 {
+        return Ok(None);
+    }
+    let mut last = Particles::with_capacity(scene.particles.len());
+    for packed in &states {
+        last.unpack_append(packed);
+    }
+    let measured = merge_figures(
+        &all_figures,
+        rank.shared_counters,
+        setup_s,
+        observe(&scene.particles),
+    );
+    let workers = Workers {
+        backend: BackendKind::Mpi,
+        threads: 1,
+        ranks: comm.size(),
+    };
+    let summary = summarize(&prepared, workers, &measured, &last);
+    Ok(Some(RunOutcome {
+        summary,
+        final_state: last,
+    }))
+}
+
+/// What a rank tells the others after the loop, in one gathered array: its counters,
+/// its stage and loop seconds, and what it sent.
+fn rank_figures(rank: &RankState, seconds: &LoopSeconds, sent: &Traffic) -> [f64; 17] {
     let c = &rank.counters;
     let s = &rank.stages;
-    let figures = [
+    [
         c.pair_collisions as f64,
         c.wall_collisions as f64,
         c.max_overlap,
@@ -95,22 +126,24 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         sent.exchanges as f64,
         sent.all_gathers as f64,
         sent.barriers as f64,
-    ];
-    let all_figures = comm.all_gather(&figures);
-    if comm.rank() != 0 {
-        return Ok(None);
-    }
-    let mut last = Particles::with_capacity(scene.particles.len());
-    for packed in &states {
-        last.unpack_append(packed);
-    }
-    let mut counters = rank.shared_counters;
+    ]
+}
+
+/// The run's measurements from every rank's [`rank_figures`] (in rank order) and the
+/// counters the ranks share.
+fn merge_figures(
+    all_figures: &[Vec<f64>],
+    shared_counters: StepCounters,
+    setup_s: f64,
+    initial: Observables,
+) -> Measured {
+    let mut counters = shared_counters;
     let mut stages = StageSeconds::default();
     let mut slowest_wall_s = 0.0_f64;
     // Summed in rank order: the same total on every run of the same measurements.
     let mut cpu_s = 0.0_f64;
     let mut sent_by_rank = Vec::with_capacity(all_figures.len());
-    for f in &all_figures {
+    for f in all_figures {
         counters.merge(&StepCounters {
             pair_collisions: f[0] as u64,
             wall_collisions: f[1] as u64,
@@ -134,28 +167,18 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
             barriers: f[16] as u64,
         });
     }
-    let measured = Measured {
+    Measured {
         setup_s,
         wall_s: slowest_wall_s,
         cpu_s: Some(cpu_s).filter(|s| s.is_finite()),
         stages,
         counters,
-        initial: observe(&scene.particles),
+        initial,
         accuracy: Accuracy::default(),
         // Drawing needs every disk in one process: refused before an MPI run starts.
         draw_s: None,
         traffic: Some(RankTraffic::over(&sent_by_rank)),
-    };
-    let workers = Workers {
-        backend: BackendKind::Mpi,
-        threads: 1,
-        ranks: comm.size(),
-    };
-    let summary = summarize(&prepared, workers, &measured, &last);
-    Ok(Some(RunOutcome {
-        summary,
-        final_state: last,
-    }))
+    }
 }
 
 /// Cuts the strips into `n_ranks` slabs of whole strips, each at least one strip, so
