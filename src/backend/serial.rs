@@ -14,7 +14,8 @@ use crate::run::spec::{Method, Observe, PreparedRun, RunSpec};
 use crate::sim::Stepper;
 use crate::sim::event::EventSim;
 use crate::sim::observe::{MissedCollisions, observe, temperature};
-use crate::sim::{Particles, Physics};
+use crate::sim::{Particles, Physics, StepCounters};
+use crate::system::machine::LoopSeconds;
 
 /// Builds the scene, runs it on one thread with its method, and measures the run
 /// stage by stage. Observing (the temperature curve, missed collisions) and drawing
@@ -28,78 +29,24 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
     let mut offscreen = Offscreen::when(spec.method.draw, &prepared.scene.domain, &particles);
     let mut stages = StageSeconds::default();
     let (setup_s, seconds, counters, mut accuracy) = match prepared.method {
-        Method::Step => {
-            let scene = &prepared.scene;
-            let mut stepper =
-                Stepper::new(scene.domain, scene.physics, prepared.params, &particles);
-            stepper.build_lists(&mut particles);
-            let setup_s = setup_start.elapsed().as_secs_f64();
-            let mut missed =
-                (prepared.observe == Observe::Accuracy).then(MissedCollisions::default);
-            let (domain, dt) = (prepared.scene.domain, prepared.params.dt);
-            let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, |step| {
-                if let Some(missed) = missed.as_mut() {
-                    timed(&mut curve.seconds, || {
-                        missed.before_step(&particles, &domain, dt)
-                    });
-                }
-                timed(&mut stages.integration, || stepper.advance(&mut particles));
-                timed(&mut stages.broad_phase, || {
-                    stepper.find_contacts(&mut particles)
-                });
-                match missed.as_mut() {
-                    None => timed(&mut stages.collisions, || {
-                        stepper.resolve_contacts(&mut particles)
-                    }),
-                    Some(missed) => {
-                        timed(&mut stages.collisions, || {
-                            stepper
-                                .resolve_contacts_noting(&mut particles, |key| missed.resolved(key))
-                        });
-                        timed(&mut curve.seconds, || missed.after_step());
-                    }
-                }
-                curve.sample(&prepared, step, &particles);
-                draw_step(&mut offscreen, &particles);
-                ControlFlow::Continue(())
-            });
-            let accuracy = Accuracy {
-                missed_collisions: missed.map(|m| m.missed),
-                ..Accuracy::default()
-            };
-            (setup_s, seconds, stepper.counters(), accuracy)
-        }
-        Method::Event => {
-            let scene = &prepared.scene;
-            let mut sim = EventSim::new(scene.domain, scene.physics, prepared.event, &particles);
-            let setup_s = setup_start.elapsed().as_secs_f64();
-            let mut collapse = None;
-            let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, |step| {
-                // The time of interval k is k·dt, not a running sum.
-                timed(&mut stages.collisions, || {
-                    sim.advance_to(&mut particles, step as f64 * prepared.params.dt)
-                });
-                draw_step(&mut offscreen, &particles);
-                match sim.collapse_time() {
-                    // The run ends where the method broke down; so does its curve.
-                    Some(time) => {
-                        curve.push(time, &particles);
-                        collapse = Some(Collapse { time, steps: step });
-                        ControlFlow::Break(())
-                    }
-                    None => {
-                        curve.sample(&prepared, step, &particles);
-                        ControlFlow::Continue(())
-                    }
-                }
-            });
-            let accuracy = Accuracy {
-                collapse_guard: Some((sim.collapse_guard_fired(), prepared.event.tc)),
-                collapse,
-                ..Accuracy::default()
-            };
-            (setup_s, seconds, sim.counters(), accuracy)
-        }
+        Method::Step => step_method(
+            spec,
+            &prepared,
+            setup_start,
+            &mut particles,
+            &mut curve,
+            &mut offscreen,
+            &mut stages,
+        ),
+        Method::Event => event_method(
+            spec,
+            &prepared,
+            setup_start,
+            &mut particles,
+            &mut curve,
+            &mut offscreen,
+            &mut stages,
+        ),
     };
     // Observing and drawing are single-threaded work inside the loop: out of both clocks.
     let draw_s = offscreen.map(|offscreen| offscreen.seconds);
@@ -128,6 +75,96 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
         summary,
         final_state: particles,
     })
+}
+
+/// The step method from its lists to its last step; returns the set-up seconds, the
+/// loop's seconds, the counters and the missed collisions.
+fn step_method(
+    spec: &RunSpec,
+    prepared: &PreparedRun,
+    setup_start: Instant,
+    particles: &mut Particles,
+    curve: &mut Curve,
+    offscreen: &mut Option<Offscreen>,
+    stages: &mut StageSeconds,
+) -> (f64, LoopSeconds, StepCounters, Accuracy) {
+    let scene = &prepared.scene;
+    let mut stepper = Stepper::new(scene.domain, scene.physics, prepared.params, particles);
+    stepper.build_lists(particles);
+    let setup_s = setup_start.elapsed().as_secs_f64();
+    let mut missed = (prepared.observe == Observe::Accuracy).then(MissedCollisions::default);
+    let (domain, dt) = (prepared.scene.domain, prepared.params.dt);
+    let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, |step| {
+        if let Some(missed) = missed.as_mut() {
+            timed(&mut curve.seconds, || {
+                missed.before_step(particles, &domain, dt)
+            });
+        }
+        timed(&mut stages.integration, || stepper.advance(particles));
+        timed(&mut stages.broad_phase, || stepper.find_contacts(particles));
+        match missed.as_mut() {
+            None => timed(&mut stages.collisions, || {
+                stepper.resolve_contacts(particles)
+            }),
+            Some(missed) => {
+                timed(&mut stages.collisions, || {
+                    stepper.resolve_contacts_noting(particles, |key| missed.resolved(key))
+                });
+                timed(&mut curve.seconds, || missed.after_step());
+            }
+        }
+        curve.sample(prepared, step, particles);
+        draw_step(offscreen, particles);
+        ControlFlow::Continue(())
+    });
+    let accuracy = Accuracy {
+        missed_collisions: missed.map(|m| m.missed),
+        ..Accuracy::default()
+    };
+    (setup_s, seconds, stepper.counters(), accuracy)
+}
+
+/// The event method from its first prediction to its last interval or a detected
+/// collapse; returns the set-up seconds, the loop's seconds, the counters, the TC guard
+/// and the collapse.
+fn event_method(
+    spec: &RunSpec,
+    prepared: &PreparedRun,
+    setup_start: Instant,
+    particles: &mut Particles,
+    curve: &mut Curve,
+    offscreen: &mut Option<Offscreen>,
+    stages: &mut StageSeconds,
+) -> (f64, LoopSeconds, StepCounters, Accuracy) {
+    let scene = &prepared.scene;
+    let mut sim = EventSim::new(scene.domain, scene.physics, prepared.event, particles);
+    let setup_s = setup_start.elapsed().as_secs_f64();
+    let mut collapse = None;
+    let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, |step| {
+        // The time of interval k is k·dt, not a running sum.
+        timed(&mut stages.collisions, || {
+            sim.advance_to(particles, step as f64 * prepared.params.dt)
+        });
+        draw_step(offscreen, particles);
+        match sim.collapse_time() {
+            // The run ends where the method broke down; so does its curve.
+            Some(time) => {
+                curve.push(time, particles);
+                collapse = Some(Collapse { time, steps: step });
+                ControlFlow::Break(())
+            }
+            None => {
+                curve.sample(prepared, step, particles);
+                ControlFlow::Continue(())
+            }
+        }
+    });
+    let accuracy = Accuracy {
+        collapse_guard: Some((sim.collapse_guard_fired(), prepared.event.tc)),
+        collapse,
+        ..Accuracy::default()
+    };
+    (setup_s, seconds, sim.counters(), accuracy)
 }
 
 /// The temperature curve [t, kinetic energy per disk], and the seconds spent observing.
