@@ -1,6 +1,6 @@
-//! Observables of a state: energy, momentum, the bitwise state hash, the exact count of
-//! collisions the time-stepped method misses, and a run's temperature, pressure and
-//! compressibility factor.
+//! Observables of a state: energy (kinetic, and potential in a field), momentum, the
+//! bitwise state hash, the exact count of collisions the time-stepped method misses,
+//! and a run's temperature, pressure and compressibility factor.
 //!
 //! Sums run in id order so that they do not depend on storage order or on how
 //! disks were divided among workers.
@@ -35,6 +35,21 @@ pub fn observe(particles: &Particles) -> Observables {
         kinetic_energy,
         momentum,
     }
+}
+
+/// The potential energy of the disks in the constant field `gravity`, −Σ m g·x (zero
+/// at the box's lower left corner), summed in id order; 0 without a field. With the
+/// kinetic energy it makes the total that an elastic scene with gravity conserves.
+pub fn potential_energy(particles: &Particles, gravity: Option<[f64; 2]>) -> f64 {
+    let Some([gx, gy]) = gravity else {
+        return 0.0;
+    };
+    let mut energy = 0.0;
+    // Fixed order (by id): floating-point sums are not associative.
+    particles.for_each_in_id_order(|idx| {
+        energy -= particles.mass[idx] * (gx * particles.x[idx] + gy * particles.y[idx]);
+    });
+    energy
 }
 
 /// The temperature of a state in 2D (k_B = 1): kinetic energy per disk.
