@@ -76,7 +76,7 @@ pub fn run(options: &CheckOptions) -> anyhow::Result<CheckOutcome> {
     check_output_folder(&options.out, "--out")?;
     let (study, text) = manifest::load(&options.manifest)?;
     let environment = Environment::capture();
-    let manifest_hash = runner::manifest_hash(&text);
+    let manifest_hash = runner::text_hash(&text);
     let old = match options.update_baseline {
         true => None,
         false => Some(baseline::load(

@@ -169,7 +169,7 @@ pub fn run_study(
         scene_files: materialize_scenes(&dir, &configurations)?,
         configurations,
         scene_hashes,
-        manifest_hash: manifest_hash(manifest_text),
+        manifest_hash: text_hash(manifest_text),
         build_id,
         environment,
         started_utc: records::utc_now(),
@@ -665,12 +665,10 @@ fn runnable(study: &Study) -> anyhow::Result<Vec<&Configuration>> {
     Ok(configurations)
 }
 
-/// xxh3 of a manifest's text, as recorded in `manifest_hash`.
-pub fn manifest_hash(manifest_text: &str) -> String {
-    format!(
-        "{:016x}",
-        xxhash_rust::xxh3::xxh3_64(manifest_text.as_bytes())
-    )
+/// xxh3 of a text, in hex: a manifest's as recorded in `manifest_hash`, a scene's in
+/// `scene_hash`.
+pub fn text_hash(text: &str) -> String {
+    format!("{:016x}", xxhash_rust::xxh3::xxh3_64(text.as_bytes()))
 }
 
 /// Holds the study folder `dir` for this process until the file returned is dropped (or
@@ -776,7 +774,7 @@ fn scene_hash(input: &SceneInput) -> anyhow::Result<String> {
             .map_err(|reason| anyhow!("cannot read scene file {}: {reason}", path.display()))?,
         SceneInput::Inline(text) => text.clone(),
     };
-    Ok(manifest_hash(&text))
+    Ok(text_hash(&text))
 }
 
 /// The scene file each configuration's process reads: its own file, or its inline scene
