@@ -4,23 +4,29 @@
 //! rank sends through any of them, by one definition (the trait's docs).
 
 use std::cell::Cell;
-use std::sync::{Arc, Barrier, Mutex};
+use std::collections::VecDeque;
+use std::sync::{Arc, Barrier, Condvar, Mutex};
 
 /// A group of ranks that exchange `f64` buffers. Every rank must call the same
-/// collectives in the same order.
+/// collectives in the same order; point-to-point calls pair up between the ranks they
+/// name.
 ///
 /// **What a rank sends**, as [`Counting`] counts it ([`Traffic`]): the messages and
-/// bytes that MPI's linear algorithms send for the calls `MpiComm` (`backend::mpi`)
-/// makes, whatever the implementation (threads move the same buffers through memory):
+/// bytes that MPI's algorithms send for the calls `MpiComm` (`backend::mpi`) makes,
+/// whatever the implementation (threads move the same buffers through memory):
 /// - [`exchange`](Communicator::exchange) is an all-to-all of the counts, then an
 ///   all-to-allv of the data: one message of [`COUNT_BYTES`] to every other rank, and
 ///   one message to every other rank whose buffer is non-empty, of 8 bytes a value;
 /// - [`all_gather`](Communicator::all_gather) is an all-gather of the counts, then an
 ///   all-gatherv: the same as an exchange that sends `data` to every other rank;
-/// - [`barrier`](Communicator::barrier) moves no data and sends nothing.
+/// - [`max_all`](Communicator::max_all) is an all-reduce by recursive doubling: one
+///   message of the values to each of ⌈log₂ P⌉ other ranks;
+/// - [`barrier`](Communicator::barrier) moves no data and sends nothing;
+/// - [`send_receive`](Communicator::send_receive) is not a collective: one message to
+///   each rank it sends to, even an empty one, of 8 bytes a value.
 ///
-/// Nothing is sent to the rank itself, so one rank sends nothing at all. Each call is
-/// one collective, whatever MPI calls it makes.
+/// Nothing is sent to the rank itself, so one rank sends nothing at all. Each call of
+/// the first four is one collective, whatever MPI calls it makes.
 pub trait Communicator {
     fn rank(&self) -> usize;
     fn size(&self) -> usize;
@@ -29,8 +35,16 @@ pub trait Communicator {
     fn exchange(&self, outgoing: &[Vec<f64>]) -> Vec<Vec<f64>>;
     /// Every rank's `data`, indexed by rank, on every rank.
     fn all_gather(&self, data: &[f64]) -> Vec<Vec<f64>>;
+    /// The largest of each entry of `values` over the ranks, on every rank (every rank
+    /// passes as many values).
+    fn max_all(&self, values: &[f64]) -> Vec<f64>;
     /// Returns once every rank has called it.
     fn barrier(&self);
+    /// Sends each buffer of `sends` to its rank and returns one buffer from each rank of
+    /// `from`, in that order. Only the ranks named take part, and they must pair up: a
+    /// rank sends to another exactly when that one receives from it in its own call.
+    /// Ranks are named once each, never this rank.
+    fn send_receive(&self, sends: &[(usize, &[f64])], from: &[usize]) -> Vec<Vec<f64>>;
 }
 
 /// Ranks as threads of one process, meeting at a barrier: for tests and for machines
@@ -47,6 +61,10 @@ struct Shared {
     barrier: Barrier,
     /// `mailbox[to][from]`: the buffer in flight from `from` to `to`.
     mailbox: Mutex<Vec<Vec<Vec<f64>>>>,
+    /// `posts[to][from]`: the point-to-point buffers in flight from `from` to `to`, in
+    /// the order sent, and a signal for their receivers.
+    posts: Mutex<Vec<Vec<VecDeque<Vec<f64>>>>>,
+    posted: Condvar,
 }
 
 impl ThreadComm {
@@ -55,6 +73,8 @@ impl ThreadComm {
         let shared = Arc::new(Shared {
             barrier: Barrier::new(size),
             mailbox: Mutex::new(vec![vec![Vec::new(); size]; size]),
+            posts: Mutex::new(vec![vec![VecDeque::new(); size]; size]),
+            posted: Condvar::new(),
         });
         (0..size)
             .map(|rank| ThreadComm {
@@ -102,8 +122,42 @@ impl Communicator for ThreadComm {
         self.exchange(&vec![data.to_vec(); self.size])
     }
 
+    fn max_all(&self, values: &[f64]) -> Vec<f64> {
+        let mut largest = values.to_vec();
+        for other in self.all_gather(values) {
+            for (value, theirs) in largest.iter_mut().zip(other) {
+                *value = value.max(theirs);
+            }
+        }
+        largest
+    }
+
     fn barrier(&self) {
         self.shared.barrier.wait();
+    }
+
+    fn send_receive(&self, sends: &[(usize, &[f64])], from: &[usize]) -> Vec<Vec<f64>> {
+        let lock = || (self.shared.posts.lock()).unwrap_or_else(|poisoned| poisoned.into_inner());
+        {
+            let mut posts = lock();
+            for &(to, buffer) in sends {
+                posts[to][self.rank].push_back(buffer.to_vec());
+            }
+        }
+        self.shared.posted.notify_all();
+        let mut posts = lock();
+        let mut received = Vec::with_capacity(from.len());
+        for &sender in from {
+            loop {
+                if let Some(buffer) = posts[self.rank][sender].pop_front() {
+                    received.push(buffer);
+                    break;
+                }
+                posts = (self.shared.posted.wait(posts))
+                    .unwrap_or_else(|poisoned| poisoned.into_inner());
+            }
+        }
+        received
     }
 }
 
@@ -119,37 +173,35 @@ const VALUE_BYTES: u64 = size_of::<f64>() as u64;
 pub struct Traffic {
     pub messages: u64,
     pub bytes: u64,
-    pub exchanges: u64,
-    pub all_gathers: u64,
-    pub barriers: u64,
+    /// Collectives called, of every kind.
+    pub collectives: u64,
 }
 
 impl Traffic {
-    /// The collectives called, of every kind.
-    pub fn collectives(&self) -> u64 {
-        self.exchanges + self.all_gathers + self.barriers
-    }
-
     /// What was sent after `earlier`, a reading of the same counter.
     pub fn since(&self, earlier: &Traffic) -> Traffic {
         Traffic {
             messages: self.messages - earlier.messages,
             bytes: self.bytes - earlier.bytes,
-            exchanges: self.exchanges - earlier.exchanges,
-            all_gathers: self.all_gathers - earlier.all_gathers,
-            barriers: self.barriers - earlier.barriers,
+            collectives: self.collectives - earlier.collectives,
         }
+    }
+
+    /// Counts a message of `len` values.
+    fn count_message(&mut self, len: usize) {
+        self.messages += 1;
+        self.bytes += len as u64 * VALUE_BYTES;
     }
 
     /// Counts the messages of one collective that moves data: the counts round to every
     /// other rank, then a message for each non-empty buffer of `lengths` (values sent
     /// to each other rank).
     fn count_buffers(&mut self, n_others: usize, lengths: impl Iterator<Item = usize>) {
+        self.collectives += 1;
         self.messages += n_others as u64;
         self.bytes += n_others as u64 * COUNT_BYTES;
         for len in lengths.filter(|&len| len > 0) {
-            self.messages += 1;
-            self.bytes += len as u64 * VALUE_BYTES;
+            self.count_message(len);
         }
     }
 }
@@ -174,7 +226,7 @@ impl RankTraffic {
         debug_assert!(
             ranks
                 .windows(2)
-                .all(|w| w[0].collectives() == w[1].collectives()),
+                .all(|w| w[0].collectives == w[1].collectives),
             "every rank calls the same collectives"
         );
         let n_ranks = ranks.len().max(1) as f64;
@@ -186,7 +238,7 @@ impl RankTraffic {
             messages_mean: mean(|t| t.messages),
             bytes_max: max(|t| t.bytes),
             bytes_mean: mean(|t| t.bytes),
-            collectives: max(Traffic::collectives),
+            collectives: max(|t| t.collectives),
         }
     }
 }
@@ -230,7 +282,6 @@ impl<C: Communicator> Communicator for Counting<'_, C> {
     fn exchange(&self, outgoing: &[Vec<f64>]) -> Vec<Vec<f64>> {
         let me = self.rank();
         self.count(|traffic| {
-            traffic.exchanges += 1;
             let to_others = (outgoing.iter().enumerate())
                 .filter(|&(to, _)| to != me)
                 .map(|(_, buffer)| buffer.len());
@@ -242,15 +293,34 @@ impl<C: Communicator> Communicator for Counting<'_, C> {
     fn all_gather(&self, data: &[f64]) -> Vec<Vec<f64>> {
         let n_others = self.size() - 1;
         self.count(|traffic| {
-            traffic.all_gathers += 1;
             traffic.count_buffers(n_others, std::iter::repeat_n(data.len(), n_others));
         });
         self.inner.all_gather(data)
     }
 
+    fn max_all(&self, values: &[f64]) -> Vec<f64> {
+        let partners = (self.size() as u64).next_power_of_two().trailing_zeros();
+        self.count(|traffic| {
+            traffic.collectives += 1;
+            for _ in 0..partners {
+                traffic.count_message(values.len());
+            }
+        });
+        self.inner.max_all(values)
+    }
+
     fn barrier(&self) {
-        self.count(|traffic| traffic.barriers += 1);
+        self.count(|traffic| traffic.collectives += 1);
         self.inner.barrier();
+    }
+
+    fn send_receive(&self, sends: &[(usize, &[f64])], from: &[usize]) -> Vec<Vec<f64>> {
+        self.count(|traffic| {
+            for (_, buffer) in sends {
+                traffic.count_message(buffer.len());
+            }
+        });
+        self.inner.send_receive(sends, from)
     }
 }
 
@@ -297,11 +367,7 @@ mod tests {
         assert_eq!(traffic[1].bytes, counts + 16);
         assert_eq!(traffic[2].messages, 2);
         assert_eq!(traffic[2].bytes, counts);
-        assert!(
-            traffic
-                .iter()
-                .all(|t| t.exchanges == 1 && t.collectives() == 1)
-        );
+        assert!(traffic.iter().all(|t| t.collectives == 1));
     }
 
     #[test]
@@ -318,7 +384,7 @@ mod tests {
                 3 * COUNT_BYTES + 3 * 8 * rank as u64,
                 "rank {rank}"
             );
-            assert_eq!((t.all_gathers, t.barriers, t.collectives()), (1, 1, 2));
+            assert_eq!(t.collectives, 2);
         }
     }
 
@@ -329,6 +395,40 @@ mod tests {
             comm.all_gather(&[1.0; 5]);
         });
         assert_eq!((traffic[0].messages, traffic[0].bytes), (0, 0));
-        assert_eq!(traffic[0].collectives(), 2);
+        assert_eq!(traffic[0].collectives, 2);
+    }
+
+    /// Ranks in a ring each send to the next and receive from the one before, twice, so
+    /// that a fast rank's second message waits in line behind its first.
+    #[test]
+    fn point_to_point_buffers_arrive_in_the_order_sent_and_count_one_message_each() {
+        let traffic = counted(3, |comm| {
+            let me = comm.rank();
+            let (next, previous) = ((me + 1) % 3, (me + 2) % 3);
+            for round in 0..2 {
+                let mine = vec![(10 * me + round) as f64; me];
+                let got = comm.send_receive(&[(next, &mine)], &[previous]);
+                assert_eq!(got, vec![vec![(10 * previous + round) as f64; previous]]);
+            }
+        });
+        for (rank, t) in traffic.iter().enumerate() {
+            assert_eq!(
+                (t.messages, t.bytes),
+                (2, 2 * 8 * rank as u64),
+                "rank {rank}"
+            );
+            assert_eq!(t.collectives, 0, "not a collective");
+        }
+    }
+
+    #[test]
+    fn max_all_gives_every_rank_the_largest_of_each_entry_in_log2_p_messages() {
+        let traffic = counted(5, |comm| {
+            let me = comm.rank() as f64;
+            assert_eq!(comm.max_all(&[me, -me]), vec![4.0, 0.0]);
+        });
+        for t in &traffic {
+            assert_eq!((t.messages, t.bytes, t.collectives), (3, 3 * 16, 1));
+        }
     }
 }

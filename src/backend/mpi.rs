@@ -2,9 +2,11 @@
 //! and one rank's run when collide was started by `mpirun`.
 
 use mpi::Count;
+use mpi::collective::SystemOperation;
 use mpi::datatype::{Partition, PartitionMut};
+use mpi::request::WaitGuard;
 use mpi::topology::SimpleCommunicator;
-use mpi::traits::{Communicator as _, CommunicatorCollectives};
+use mpi::traits::{Communicator as _, CommunicatorCollectives, Destination, Source};
 
 use crate::backend::comm::{COUNT_BYTES, Communicator};
 use crate::backend::{BackendError, RunOutcome, distributed};
@@ -83,6 +85,28 @@ impl Communicator for MpiComm {
 
     fn barrier(&self) {
         self.world.barrier();
+    }
+
+    fn max_all(&self, values: &[f64]) -> Vec<f64> {
+        let mut largest = vec![0.0; values.len()];
+        self.world
+            .all_reduce_into(values, &mut largest[..], SystemOperation::max());
+        largest
+    }
+
+    fn send_receive(&self, sends: &[(usize, &[f64])], from: &[usize]) -> Vec<Vec<f64>> {
+        let process = |rank: usize| self.world.process_at_rank(rank as i32);
+        mpi::request::scope(|scope| {
+            // Every send is posted before any receive waits, so ranks that send to each
+            // other never wait on each other; the guards wait for the sends at the end.
+            let _sending: Vec<WaitGuard<'_, [f64], _>> = sends
+                .iter()
+                .map(|&(to, buffer)| WaitGuard::from(process(to).immediate_send(scope, buffer)))
+                .collect();
+            from.iter()
+                .map(|&sender| process(sender).receive_vec::<f64>().0)
+                .collect()
+        })
     }
 
     fn exchange(&self, outgoing: &[Vec<f64>]) -> Vec<Vec<f64>> {

@@ -168,7 +168,7 @@ fn has_escaped(moved_sq: f64, escape_sq: f64) -> bool {
 /// The larger of two squared distances, NaN winning (a disk gone astray makes the
 /// lists stale: [`Skin::is_exceeded`]).
 #[inline(always)]
-pub fn larger(a: f64, b: f64) -> f64 {
+fn larger(a: f64, b: f64) -> f64 {
     if a >= b || a.is_nan() { a } else { b }
 }
 
