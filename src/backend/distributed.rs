@@ -16,11 +16,12 @@
 //! disks. So every chain sees its contacts in the serial order, which is why the bits
 //! agree.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::ops::{ControlFlow, Range};
 use std::time::Instant;
 
 use crate::backend::comm::{Communicator, Counting, RankTraffic, Traffic};
+use crate::backend::shared::{Neighbourhood, Seen, SharedChains, pack_shared_disk};
 use crate::backend::{
     Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
     summarize, timed,
@@ -223,14 +224,13 @@ struct RankState {
     slab: Range<usize>,
     /// Owner rank of each strip.
     owner: Vec<usize>,
-    /// Rank that receives this slab's first strip as ghosts, if any.
-    export_to: Option<usize>,
     /// Rank that sends the ghost strip, if any.
     ghosts_from: Option<usize>,
-    /// The ranks whose strips lie within [`PEER_STRIPS`] strips of the slab, in rank
-    /// order: the only ones this rank sends to or hears from in a step, but for the
-    /// shared contacts (and migrants that went further, see [`RankState::redistribute`]).
-    peers: Vec<usize>,
+    /// Every rank's peers, those whose strips lie within [`PEER_STRIPS`] strips of its
+    /// slab, and the rank below it: the only ranks this rank talks to in a step, but
+    /// when chains or migrants reach further (see [`RankState::share_chains`] and
+    /// [`RankState::redistribute`]).
+    hood: Neighbourhood,
     /// The rank's own disks; during a step, ghosts follow them.
     particles: Particles,
     /// How many of `particles` are the rank's own (the rest are this step's ghosts).
@@ -250,6 +250,10 @@ struct RankState {
     sent: DiskSet,
     /// The reported escapees, packed.
     reported: Vec<f64>,
+    /// Where the peers' reported escapees start among `particles`, after the ghosts,
+    /// and the rank that sent each.
+    first_reported: usize,
+    reported_from: Vec<usize>,
     /// When the own disks are next stored in grid order: the scene's schedule.
     reorder: ReorderSchedule,
     movers: Vec<Mover>,
@@ -342,20 +346,16 @@ impl RankState {
         let mut grid = StripGrid::window(&scene.domain, layout, slab.clone());
         grid.fill(&particles, 0..particles.len());
         let periodic = scene.domain.boundary == Boundary::Periodic;
-        let below = match slab.start {
-            0 if periodic => Some(layout.n_strips - 1),
-            0 => None,
-            start => Some(start - 1),
-        };
         let other = |strip: usize| Some(owner[strip]).filter(|&rank| rank != me);
-        let peers = peers_of(&owner, &slab, periodic, me);
+        let hood = Neighbourhood::new(slabs, periodic, me, |rank| {
+            peers_of(&owner, &slabs[rank], periodic, rank)
+        });
         RankState {
             domain: scene.domain,
             physics: scene.physics,
             layout,
-            export_to: below.and_then(other),
             ghosts_from: grid.ghost_strip().and_then(other),
-            peers,
+            hood,
             slab,
             owner,
             n_own: particles.len(),
@@ -371,6 +371,8 @@ impl RankState {
             escapees: Vec::new(),
             sent: DiskSet::default(),
             reported: Vec::new(),
+            first_reported: 0,
+            reported_from: Vec::new(),
             schedule: ContactSchedule::default(),
             counters: StepCounters::default(),
             shared_counters: StepCounters::default(),
@@ -407,12 +409,7 @@ impl RankState {
         }
         let reported = match (stale && !rebuild, all.reported) {
             (true, true) => timed(&mut stages.communication, || {
-                let sends: Vec<(usize, &[f64])> = self
-                    .peers
-                    .iter()
-                    .map(|&peer| (peer, &self.reported[..]))
-                    .collect();
-                Some(comm.send_receive(&sends, &self.peers))
+                Some(self.swap_with_peers(comm, &self.reported))
             }),
             (true, false) => Some(Vec::new()),
             (false, _) => None,
@@ -425,13 +422,130 @@ impl RankState {
             self.find_contacts(ghosts, rebuild, escapees)
         });
         timed(&mut stages.collisions, || self.resolve_own_chains(dt));
-        let shared = timed(&mut stages.communication, || {
-            comm.all_gather(&self.pack_shared())
-        });
-        timed(&mut stages.collisions, || {
-            self.resolve_shared_chains(&shared, dt)
-        });
+        self.share_chains(comm, &mut stages, dt);
         self.stages = stages;
+    }
+
+    /// Sends `data` to every peer and returns what each sent, in the peers' order.
+    fn swap_with_peers<C: Communicator>(&self, comm: &C, data: &[f64]) -> Vec<Vec<f64>> {
+        let peers = self.hood.peers();
+        let sends: Vec<(usize, &[f64])> = peers.iter().map(|&peer| (peer, data)).collect();
+        comm.send_receive(&sends, peers)
+    }
+
+    /// Resolves the chains that may span ranks. Each rank sends its shared contacts to
+    /// its peers and resolves the chains of its own disks that they close
+    /// ([`SharedChains`]); the ranks then learn in one small all-reduce whether some
+    /// rank had a chain that reaches further. If one had, every rank gathers every
+    /// shared contact instead and resolves them all ([`RankState::resolve_shared_chains`]).
+    /// Either way the ghosts and reported escapees are dropped.
+    fn share_chains<C: Communicator>(&mut self, comm: &C, stages: &mut StageSeconds, dt: f64) {
+        let mine = timed(&mut stages.collisions, || self.pack_shared_for_peers());
+        let theirs = timed(&mut stages.communication, || {
+            self.swap_with_peers(comm, &mine)
+        });
+        let resolution = timed(&mut stages.collisions, || {
+            let mut buffers = vec![&mine[..]];
+            buffers.extend(theirs.iter().map(Vec::as_slice));
+            let (grid, hood, owner, reach) =
+                (&self.grid, &self.hood, &self.owner, self.skin.patch_reach());
+            let chains = SharedChains {
+                hood,
+                query_is_near: |y, radius| {
+                    (grid.strips_queried(y, radius, reach, &self.domain))
+                        .all(|strip| hood.is_near(owner[strip]))
+                },
+                domain: &self.domain,
+                physics: &self.physics,
+                dt,
+            };
+            chains.resolve_closed_chains(&buffers, &self.own_shared_slots())
+        });
+        let open = timed(&mut stages.communication, || {
+            comm.max_all(&[f64::from(resolution.is_none())])[0] > 0.0
+        });
+        match resolution.filter(|_| !open) {
+            Some(resolution) => {
+                resolution.apply(&mut self.particles);
+                self.counters.merge(&resolution.counters);
+                self.particles.truncate(self.n_own);
+            }
+            None => {
+                let shared = timed(&mut stages.communication, || {
+                    comm.all_gather(&self.pack_shared())
+                });
+                timed(&mut stages.collisions, || {
+                    self.resolve_shared_chains(&shared, dt)
+                });
+            }
+        }
+    }
+
+    /// The shared contacts, both disks of each, with their owner and how other ranks saw
+    /// them ([`pack_shared_disk`]).
+    fn pack_shared_for_peers(&self) -> Vec<f64> {
+        let (particles, n_own, first_reported) = (&self.particles, self.n_own, self.first_reported);
+        // Escapees the rank above reported, which may be ghosts here too.
+        let reported_above: HashSet<u32> = (first_reported..particles.len())
+            .filter(|&idx| Some(self.reported_from[idx - first_reported]) == self.ghosts_from)
+            .map(|idx| particles.id[idx])
+            .collect();
+        let about = |idx: usize| match idx {
+            _ if idx < n_own => (
+                self.hood.rank(),
+                Seen {
+                    exported: self.exported.contains(idx as u32),
+                    reported: self.sent.contains(idx as u32),
+                },
+            ),
+            _ if idx < first_reported => (
+                self.ghosts_from.expect("ghosts come from the rank above"),
+                Seen {
+                    exported: true,
+                    reported: reported_above.contains(&particles.id[idx]),
+                },
+            ),
+            _ => (
+                self.reported_from[idx - first_reported],
+                Seen {
+                    exported: false,
+                    reported: true,
+                },
+            ),
+        };
+        let mut packed = Vec::with_capacity(self.shared.len() * 2 * (PACKED_LEN + 2));
+        for contact in &self.shared {
+            for idx in [contact.a as usize, contact.b as usize] {
+                let (owner, seen) = about(idx);
+                pack_shared_disk(particles, idx, owner, seen, &mut packed);
+            }
+        }
+        packed
+    }
+
+    /// The storage index, by id, of every own disk that may be in a shared chain: those
+    /// of this rank's shared contacts, and the exported and reported ones, which another
+    /// rank's contacts may hold.
+    fn own_shared_slots(&self) -> HashMap<u32, usize> {
+        let n_own = self.n_own;
+        let mut own_slots: HashMap<u32, usize> = HashMap::new();
+        for contact in &self.shared {
+            for idx in [contact.a as usize, contact.b as usize] {
+                if idx < n_own {
+                    own_slots.insert(self.particles.id[idx], idx);
+                }
+            }
+        }
+        if self.hood.export_to().is_some() {
+            for entry in self.grid.strip_entries(self.slab.start) {
+                let idx = entry.idx() as usize;
+                own_slots.insert(self.particles.id[idx], idx);
+            }
+        }
+        for &idx in self.escapees.iter().filter(|&&idx| self.sent.contains(idx)) {
+            own_slots.insert(self.particles.id[idx as usize], idx as usize);
+        }
+        own_slots
     }
 
     /// The first half of a rebuild, on every rank together: the disks that left the
@@ -450,10 +564,10 @@ impl RankState {
         let to_peers = moved_sq.sqrt() < self.layout.height() / self.layout.n_strips as f64;
         let immigrants = timed(&mut stages.communication, || match to_peers {
             true => {
-                let sends: Vec<(usize, &[f64])> = (self.peers.iter())
+                let sends: Vec<(usize, &[f64])> = (self.hood.peers().iter())
                     .map(|&peer| (peer, &emigrants[peer][..]))
                     .collect();
-                comm.send_receive(&sends, &self.peers)
+                comm.send_receive(&sends, self.hood.peers())
             }
             false => comm.exchange(&emigrants),
         });
@@ -584,7 +698,7 @@ impl RankState {
     /// Notes which own disks the rank below will see as ghosts until the next build.
     fn mark_exported(&mut self) {
         self.exported.clear(self.particles.len());
-        if self.export_to.is_some() {
+        if self.hood.export_to().is_some() {
             for entry in self.grid.strip_entries(self.slab.start) {
                 self.exported.insert(entry.idx());
             }
@@ -592,7 +706,7 @@ impl RankState {
         debug_assert!(
             (0..self.particles.len()).all(|disk| {
                 let first = self.layout.strip_of(self.particles.y[disk]) == self.slab.start;
-                self.exported.contains(disk as u32) == (self.export_to.is_some() && first)
+                self.exported.contains(disk as u32) == (self.hood.export_to().is_some() && first)
             }),
             "the first strip's entries are the own disks built there"
         );
@@ -602,13 +716,12 @@ impl RankState {
     /// returns the ghosts from the rank above (empty when there is none).
     fn swap_halo<C: Communicator>(&self, comm: &C) -> Vec<f64> {
         let mut halo = Vec::new();
-        if self.export_to.is_some() {
+        if self.hood.export_to().is_some() {
             for entry in self.grid.strip_entries(self.slab.start) {
                 self.particles.pack(entry.idx() as usize, &mut halo);
             }
         }
-        let sends: Vec<(usize, &[f64])> = self
-            .export_to
+        let sends: Vec<(usize, &[f64])> = (self.hood.export_to())
             .map(|to| (to, &halo[..]))
             .into_iter()
             .collect();
@@ -655,6 +768,8 @@ impl RankState {
         escapees: Option<(&[Vec<f64>], f64)>,
     ) {
         self.take_ghosts(ghosts, rebuild);
+        self.first_reported = self.particles.len();
+        self.reported_from.clear();
         let n_own = self.n_own;
         self.contacts.clear();
         self.list
@@ -685,8 +800,11 @@ impl RankState {
     fn find_contacts_of_escapees(&mut self, reports: &[Vec<f64>], moved: f64) {
         let first_reported = self.particles.len();
         self.make_room(reports.iter().map(Vec::as_slice));
-        for report in reports {
+        for (report, &from) in reports.iter().zip(self.hood.peers()) {
             self.particles.unpack_append(report);
+            let n_disks = report.len() / PACKED_LEN;
+            self.reported_from
+                .extend(std::iter::repeat_n(from, n_disks));
         }
         let mut queried = self.escapees.clone();
         queried.extend(first_reported as u32..self.particles.len() as u32);
@@ -770,26 +888,7 @@ impl RankState {
             &mut self.shared_counters,
             |_| {},
         );
-        // Own disks in shared chains: those in this rank's shared contacts, and exported
-        // and reported ones, which another rank's contacts may hold.
-        let n_own = self.n_own;
-        let mut own_slots: HashMap<u32, usize> = HashMap::new();
-        for contact in &self.shared {
-            for idx in [contact.a as usize, contact.b as usize] {
-                if idx < n_own {
-                    own_slots.insert(self.particles.id[idx], idx);
-                }
-            }
-        }
-        if self.export_to.is_some() {
-            for entry in self.grid.strip_entries(self.slab.start) {
-                let idx = entry.idx() as usize;
-                own_slots.insert(self.particles.id[idx], idx);
-            }
-        }
-        for &idx in self.escapees.iter().filter(|&&idx| self.sent.contains(idx)) {
-            own_slots.insert(self.particles.id[idx as usize], idx as usize);
-        }
+        let own_slots = self.own_shared_slots();
         for (slot, id) in disks.id.iter().enumerate() {
             if let Some(&idx) = own_slots.get(id) {
                 self.particles.x[idx] = disks.x[slot];
@@ -798,7 +897,7 @@ impl RankState {
                 self.particles.vy[idx] = disks.vy[slot];
             }
         }
-        self.particles.truncate(n_own);
+        self.particles.truncate(self.n_own);
     }
 }
 
@@ -869,51 +968,94 @@ mod tests {
         spec.method = MethodSpec::stepped(0.05, 600, Broadphase::Grid);
         let reference = serial::run(&spec).unwrap().summary;
         assert!(reference.max_wall_penetration > 0.0);
-        for ranks in [2, 4] {
+        for ranks in [2, 8] {
             let summary = run_on_threads(&spec, ranks).summary;
             assert_eq!(summary.state_hash, reference.state_hash, "{ranks} ranks");
             assert_eq!(
                 summary.max_wall_penetration, reference.max_wall_penetration,
                 "{ranks} ranks"
             );
+            // The pile, a third of the box, is one chain: across more than a rank and its
+            // peers from 8 ranks on, and then the ranks gather it on some steps.
+            let gathered = summary.collectives_per_step.unwrap() > 2.0;
+            assert_eq!(gathered, ranks >= 8, "{ranks} ranks: {summary}");
         }
     }
 
-    /// What a rank sends per step, by the [`Communicator`] docs' count. Every step calls
-    /// two collectives, whatever P: the all-reduce of the escapee summaries (⌈log₂ P⌉
-    /// messages) and the shared contacts' all-gather (a count to every other rank, and
-    /// the contacts too when there are any). The halo, the migrants and the reported
-    /// escapees go to peers only, at most [`PEER_STRIPS`] strips away: with slabs of at
-    /// least that many strips, the two ranks beside. So a rank sends between P − 1 and
-    /// ⌈log₂ P⌉ + 2·(P − 1) + 1 + 2·2 messages per step: the all-gather is what still
-    /// grows with P.
+    /// Up to 64 ranks, on boxes tall enough for them: an elastic gas of equal disks in
+    /// a periodic box, and an inelastic gas of unequal disks between walls.
     #[test]
-    fn a_step_calls_two_collectives_and_sends_the_rest_to_the_ranks_beside() {
-        let spec = spec(Boundary::Periodic, 1.0, 0.35);
-        assert_eq!(
-            serial::run(&spec).unwrap().summary.messages_per_step_max,
-            None
-        );
-        let alone = run_on_threads(&spec, 1).summary;
-        assert_eq!(alone.messages_per_step_max, Some(0.0));
-        assert_eq!(alone.bytes_per_step_max, Some(0.0));
-        assert_eq!(alone.collectives_per_step, Some(2.0));
-        for ranks in [2, 4, 8] {
-            let summary = run_on_threads(&spec, ranks).summary;
-            let case = format!("{ranks} ranks: {summary}");
-            assert_eq!(summary.collectives_per_step, Some(2.0), "{case}");
-            let others = (ranks - 1) as f64;
-            let reduce = (ranks as f64).log2().ceil();
-            let most = reduce + 2.0 * others + 1.0 + 2.0 * 2.0;
-            let (mean, max) = (
-                summary.messages_per_step_mean.unwrap(),
-                summary.messages_per_step_max.unwrap(),
-            );
-            assert!(others <= mean && mean <= max && max <= most, "{case}");
-            // At least the counts of the all-gather and the summaries.
-            let bytes = summary.bytes_per_step_mean.unwrap();
-            assert!(bytes > 4.0 * others + 24.0 * reduce, "{case}");
+    fn many_ranks_as_threads_give_the_serial_hash() {
+        for (boundary, restitution) in [(Boundary::Periodic, 1.0), (Boundary::Walls, 0.8)] {
+            let mut spec = tall_gas(16);
+            if let SceneSource::Gas(gas) = &mut spec.scene {
+                gas.boundary = boundary;
+                gas.physics = Physics::with_restitution(restitution);
+                if restitution < 1.0 {
+                    gas.radius = RadiusDistribution::Uniform { min: 0.6, max: 1.4 };
+                    gas.mass = MassRule::Area;
+                }
+            }
+            spec.method = MethodSpec::stepped(0.05, 100, Broadphase::Grid);
+            let reference = serial::run(&spec).unwrap().summary;
+            for ranks in [6, 8, 16, 64] {
+                let summary = run_on_threads(&spec, ranks).summary;
+                let case = format!("{boundary:?}, {ranks} ranks");
+                assert_eq!(summary.state_hash, reference.state_hash, "{case}");
+                assert_eq!(summary.pair_collisions, reference.pair_collisions, "{case}");
+                assert_eq!(summary.max_overlap, reference.max_overlap, "{case}");
+            }
         }
+    }
+
+    /// A gas `height` tall and 40 wide, at packing 0.3: at `height` = 100·P, a slab of
+    /// the same size and as many disks (about 380) on every rank.
+    fn tall_gas(n_ranks: usize) -> RunSpec {
+        let (width, height) = (40.0, 100.0 * n_ranks as f64);
+        let n_particles = (0.3 * width * height / std::f64::consts::PI) as usize;
+        RunSpec {
+            scene: SceneSource::Gas(GasSpec {
+                extent: crate::sim::scene::Extent::Size { width, height },
+                boundary: Boundary::Periodic,
+                seed: 5,
+                ..GasSpec::unit(n_particles, 0.3)
+            }),
+            method: MethodSpec::stepped(0.05, 200, Broadphase::Grid),
+            slowdown: InjectedSlowdown::NONE,
+        }
+    }
+
+    /// What a rank sends per step, by the [`Communicator`] docs' count, at the same
+    /// disks per rank for 4 to 32 ranks. A step calls two small all-reduces (the
+    /// escapee summary, and whether a chain reached past the peers: ⌈log₂ P⌉ messages
+    /// each) and sends to its peers, the two ranks beside: the halo (1 message), the
+    /// shared contacts (2), and, on some steps, reported escapees (2) or migrants (2).
+    /// So without chains that reach past a peer, at most 7 messages besides the
+    /// reductions, and bytes that do not grow with P: the mean over ranks within 10%,
+    /// the busiest rank's within 30% of it (which rank is busiest varies with the gas).
+    #[test]
+    fn at_the_same_disks_per_rank_a_rank_sends_as_much_for_any_rank_count() {
+        let mut mean_bytes = Vec::new();
+        for ranks in [4, 8, 16, 32] {
+            let summary = run_on_threads(&tall_gas(ranks), ranks).summary;
+            let case = format!("{ranks} ranks: {summary}");
+            assert_eq!(
+                summary.collectives_per_step,
+                Some(2.0),
+                "no all-gather: {case}"
+            );
+            // The reductions: of 3 values and of 1, each to ⌈log₂ P⌉ ranks.
+            let partners = (ranks as f64).log2().ceil();
+            let to_peers = summary.messages_per_step_max.unwrap() - 2.0 * partners;
+            assert!((3.0..=7.0).contains(&to_peers), "{case}");
+            let [mean, max] = [summary.bytes_per_step_mean, summary.bytes_per_step_max]
+                .map(|bytes| bytes.unwrap() - (3.0 + 1.0) * 8.0 * partners);
+            assert!(max <= 1.3 * mean, "{case}");
+            mean_bytes.push(mean);
+        }
+        let (least, most) =
+            (mean_bytes.iter()).fold((f64::MAX, 0.0_f64), |(lo, hi), &b| (lo.min(b), hi.max(b)));
+        assert!(most <= 1.1 * least, "mean bytes per step: {mean_bytes:?}");
     }
 
     #[test]

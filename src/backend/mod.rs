@@ -10,6 +10,7 @@ pub mod launcher;
 #[cfg(feature = "mpi")]
 pub mod mpi;
 pub mod serial;
+mod shared;
 pub mod team;
 pub mod threads;
 

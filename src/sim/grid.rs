@@ -250,15 +250,26 @@ impl StripGrid {
     /// `radius` at height `y`, when disks moved up to `moved`, may read strips this grid
     /// does not own.
     pub fn query_leaves_owned(&self, y: f64, radius: f64, moved: f64, domain: &Domain) -> bool {
+        let owned = self.owned();
+        (self.strips_queried(y, radius, moved, domain)).any(|strip| !owned.contains(&strip))
+    }
+
+    /// The strips (global indices) a query ([`StripGrid::find_contacts_of`]) around a
+    /// disk of radius `radius` at height `y` may read, when disks moved up to `moved`.
+    pub fn strips_queried(
+        &self,
+        y: f64,
+        radius: f64,
+        moved: f64,
+        domain: &Domain,
+    ) -> impl Iterator<Item = usize> {
         let reach = self.query_reach(radius, moved);
         let strips = match domain.boundary {
             Boundary::Walls => self.query_strips::<false>(y, reach),
             Boundary::Periodic => self.query_strips::<true>(y, reach),
         };
-        let (n_strips, owned) = (self.layout.n_strips as i64, self.owned());
-        strips
-            .into_iter()
-            .any(|strip| !owned.contains(&(strip.rem_euclid(n_strips) as usize)))
+        let n_strips = self.layout.n_strips as i64;
+        strips.map(move |strip| strip.rem_euclid(n_strips) as usize)
     }
 
     /// The strips a query reaching `reach` around height `y` reads, as unwrapped global
