@@ -47,13 +47,17 @@ use crate::system::machine::LoopSeconds;
 pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcome>, BackendError> {
     let setup_start = Instant::now();
     let comm = &Counting::new(comm);
-    // Every rank builds the same initial state from the seed and keeps its slab.
-    let prepared = spec.prepare()?;
+    // Every rank builds the same initial state from the seed, keeps its slab and lets
+    // the rest go.
+    let mut prepared = spec.prepare()?;
     let scene = &prepared.scene;
+    let n_disks = scene.particles.len();
+    let initial = observe(&scene.particles);
     let skin = Skin::for_scene(&scene.domain, &scene.particles, prepared.params.dt);
     let layout = StripLayout::with_skin(&scene.domain, &scene.particles, skin.width());
     let slabs = slabs(&layout, &scene.particles, comm.size())?;
-    let mut rank = RankState::new(comm, &prepared.scene, layout, &slabs, skin);
+    let mut rank = RankState::new(comm, scene, layout, &slabs, skin);
+    prepared.scene.particles = Particles::default();
     rank.build_lists(comm);
     // The ranks start their clocks together: a rank whose set-up ended first would
     // otherwise count its wait for the slowest one (as much as a fifth of the stepping
@@ -70,27 +74,24 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     });
     let sent = comm.traffic().since(&sent_before);
 
-    // Collective reductions: the whole state and the counters, on every rank.
-    let mut mine = Vec::with_capacity(rank.particles.len() * PACKED_LEN);
+    // The whole state, on rank 0 only; the counters, on every rank.
+    let mut to_first = vec![Vec::new(); comm.size()];
+    to_first[0].reserve_exact(rank.particles.len() * PACKED_LEN);
     for idx in 0..rank.particles.len() {
-        rank.particles.pack(idx, &mut mine);
+        rank.particles.pack(idx, &mut to_first[0]);
     }
-    let states = comm.all_gather(&mine);
+    let states = comm.exchange(&to_first);
+    drop(to_first);
     let figures = rank_figures(&rank, &seconds, &sent);
     let all_figures = comm.all_gather(&figures);
     if comm.rank() != 0 {
         return Ok(None);
     }
-    let mut last = Particles::with_capacity(scene.particles.len());
+    let mut last = Particles::with_capacity(n_disks);
     for packed in &states {
         last.unpack_append(packed);
     }
-    let measured = merge_figures(
-        &all_figures,
-        rank.shared_counters,
-        setup_s,
-        observe(&scene.particles),
-    );
+    let measured = merge_figures(&all_figures, rank.shared_counters, setup_s, initial);
     let workers = Workers {
         backend: BackendKind::Mpi,
         threads: 1,

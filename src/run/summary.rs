@@ -77,8 +77,8 @@ pub struct RunSummary {
     /// MPI: bytes one rank sent per step, the mean over ranks; null for serial and rayon.
     #[serde(default)]
     pub bytes_per_step_mean: Option<f64>,
-    /// MPI: collectives (exchanges, all-gathers, barriers) each rank called per step, the
-    /// same on every rank; null for serial and rayon.
+    /// MPI: collectives (all-reduces, all-gathers, exchanges, barriers) each rank called
+    /// per step, the same on every rank; null for serial and rayon.
     #[serde(default)]
     pub collectives_per_step: Option<f64>,
     pub kinetic_energy_initial: f64,
