@@ -227,10 +227,10 @@ struct RankState {
     owner: Vec<usize>,
     /// Rank that sends the ghost strip, if any.
     ghosts_from: Option<usize>,
-    /// Every rank's peers, those whose strips lie within [`PEER_STRIPS`] strips of its
-    /// slab, and the rank below it: the only ranks this rank talks to in a step, but
-    /// when chains or migrants reach further (see [`RankState::share_chains`] and
-    /// [`RankState::redistribute`]).
+    /// This rank's peers, the ranks whose strips lie within [`PEER_STRIPS`] strips of
+    /// its slab: the only ranks it talks to in a step, but when chains or migrants reach
+    /// further (see [`RankState::share_chains`] and [`RankState::redistribute`]). Also
+    /// the rank below every rank, which sees that rank's first strip.
     hood: Neighbourhood,
     /// The rank's own disks; during a step, ghosts follow them.
     particles: Particles,
@@ -348,9 +348,8 @@ impl RankState {
         grid.fill(&particles, 0..particles.len());
         let periodic = scene.domain.boundary == Boundary::Periodic;
         let other = |strip: usize| Some(owner[strip]).filter(|&rank| rank != me);
-        let hood = Neighbourhood::new(slabs, periodic, me, |rank| {
-            peers_of(&owner, &slabs[rank], periodic, rank)
-        });
+        let peers = peers_of(&owner, &slab, periodic, me);
+        let hood = Neighbourhood::new(slabs, &owner, periodic, me, peers);
         RankState {
             domain: scene.domain,
             physics: scene.physics,

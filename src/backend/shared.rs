@@ -68,39 +68,38 @@ pub fn pack_shared_disk(
     out.push(seen.bits());
 }
 
-/// Which ranks may see whose disks: every rank's peers and the rank its first strip
-/// goes to as ghosts, from the slabs every rank knows.
+/// Which ranks may see whose disks: this rank's peers, and the rank every rank's
+/// first strip goes to as ghosts, from the slabs every rank knows.
 #[derive(Debug)]
 pub struct Neighbourhood {
     me: usize,
-    peers: Vec<Vec<usize>>,
+    peers: Vec<usize>,
     export_to: Vec<Option<usize>>,
 }
 
 impl Neighbourhood {
-    /// `slabs[r]`: the strips of rank r; `peers_of(r)`: its peers (mutual, in rank
-    /// order, never r).
+    /// `slabs[r]`: the strips of rank r; `owner[s]`: the rank of strip s; `peers`: this
+    /// rank's peers (mutual, in rank order, never `me`).
     pub fn new(
         slabs: &[Range<usize>],
+        owner: &[usize],
         periodic: bool,
         me: usize,
-        peers_of: impl Fn(usize) -> Vec<usize>,
+        peers: Vec<usize>,
     ) -> Neighbourhood {
-        let n_strips = slabs.last().map_or(0, |slab| slab.end);
-        let owner_of = |strip: usize| slabs.iter().position(|slab| slab.contains(&strip));
-        let export_to = (0..slabs.len())
-            .map(|rank| {
-                let below = match slabs[rank].start {
-                    0 if periodic => n_strips - 1,
+        let export_to = (slabs.iter().enumerate())
+            .map(|(rank, slab)| {
+                let below = match slab.start {
+                    0 if periodic => owner.len() - 1,
                     0 => return None,
                     start => start - 1,
                 };
-                owner_of(below).filter(|&owner| owner != rank)
+                Some(owner[below]).filter(|&owner| owner != rank)
             })
             .collect();
         Neighbourhood {
             me,
-            peers: (0..slabs.len()).map(peers_of).collect(),
+            peers,
             export_to,
         }
     }
@@ -112,7 +111,7 @@ impl Neighbourhood {
 
     /// This rank's peers.
     pub fn peers(&self) -> &[usize] {
-        &self.peers[self.me]
+        &self.peers
     }
 
     /// The rank this rank's first strip goes to as ghosts.
