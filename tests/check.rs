@@ -63,6 +63,47 @@ fn a_missing_or_incompatible_baseline_is_an_error_with_exit_code_2() {
     assert!(text(&incompatible.stderr).contains("--update-baseline"));
 }
 
+/// The README's build has no MPI, and the shipped baseline was recorded by one with it:
+/// the check compares what both can run and names the runs it skipped, instead of
+/// refusing the baseline.
+#[cfg(not(feature = "mpi"))]
+#[test]
+fn a_build_without_mpi_checks_a_baseline_recorded_with_it_and_names_what_it_skipped() {
+    let dir = tempfile::tempdir().unwrap();
+    scene_file(dir.path(), "scene.toml", SCENE);
+    let manifest_text = "name = \"tiny-ci\"\nrepetitions = 5\nwarmups = 1\n\
+                [[scenes]]\nfile = \"scene.toml\"\n[backends]\nserial = true\nmpi = [2]\n";
+    let manifest = scene_file(dir.path(), "ci.toml", manifest_text);
+    let manifest = manifest.to_str().unwrap();
+    let record = check(dir.path(), manifest, "with-mpi", &["--update-baseline"]);
+    assert!(record.status.success(), "{}", text(&record.stderr));
+    // As a build with MPI records it (its MPI rows aside: this build has none to give).
+    let info_path = dir.path().join("with-mpi/baseline.json");
+    let info = std::fs::read_to_string(&info_path).unwrap();
+    let mut info: serde_json::Value = serde_json::from_str(&info).unwrap();
+    info["environment"]["features"] = serde_json::json!("mpi");
+    std::fs::write(&info_path, info.to_string()).unwrap();
+
+    let checked = check(dir.path(), manifest, "with-mpi", &[]);
+    assert_ne!(checked.status.code(), Some(2), "{}", text(&checked.stderr));
+    let stdout = text(&checked.stdout);
+    assert!(
+        stdout.contains("serial ×1"),
+        "the serial runs compared: {stdout}"
+    );
+    assert!(
+        stdout.contains("not checked: the manifest's mpi runs")
+            && stdout.contains("--features mpi"),
+        "{stdout}"
+    );
+    // Counted by builds that load different libraries: not compared.
+    assert!(
+        stdout.contains("instruction counts not compared"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("instructions (callgrind) |"), "{stdout}");
+}
+
 /// The injections are a whole step's time (1.0, not 0.25): this test runs beside the
 /// rest of the suite on a shared 2-core machine, where a few tens of milliseconds per
 /// run can swing by 25% on their own. docs/ci-check.md gives the smallest slowdown the real

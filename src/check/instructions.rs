@@ -46,7 +46,7 @@ pub fn count(
     }
     let mut counts = Vec::new();
     for kind in BackendKind::ALL {
-        if kind.capabilities().mpi && !cfg!(feature = "mpi") {
+        if !kind.is_available() {
             continue;
         }
         let Some(configuration) = configurations.iter().find(|c| c.backend == kind) else {

@@ -23,7 +23,7 @@ use crate::stats::Verdict;
 use crate::study::environment::Environment;
 use crate::study::manifest::{self, Study};
 use crate::study::records::{self, Record};
-use crate::study::runner::{self, Program, RunOptions, Slowdown};
+use crate::study::runner::{self, ENABLE_MPI, Program, RunOptions, Slowdown};
 use crate::system::output::{check_output_folder, write_atomically};
 use baseline::{Baseline, BaselineInfo};
 use compare::{Row, SIDE_A, SIDE_B};
@@ -236,7 +236,11 @@ fn judge(
         .filter(|row| row.ab_side != SIDE_A)
         .cloned()
         .collect();
-    let compared = compare::compare_baseline(old, &new.info, &this_rows, options.noise)?;
+    let mut compared = compare::compare_baseline(old, &new.info, &this_rows, options.noise)?;
+    let notes = feature_notes(study, old, new);
+    if old.info.environment.features != new.info.environment.features {
+        compared.retain(|row| row.unit != compare::INSTRUCTIONS);
+    }
     let ab = match against {
         Some((rev, a)) => Some(compare_against(options, study, new, rev, &a)?),
         None => None,
@@ -249,6 +253,7 @@ fn judge(
         &compared,
         ab.as_ref(),
         timings_decide,
+        &notes,
     );
     write_summary(&options.out, &text)?;
     let deciding: Vec<&Row> = match &ab {
@@ -268,6 +273,39 @@ fn judge(
             false => CheckOutcome::Passed,
         },
     )
+}
+
+/// What a baseline recorded with other cargo features leaves out, for the summary: the
+/// manifest's backends this build cannot run (MPI without the feature `mpi`), and the
+/// instruction counts, which the MPI library's loading changes in every process.
+fn feature_notes(study: &Study, old: &Baseline, new: &Baseline) -> Vec<String> {
+    let mut unrunnable: Vec<&str> = Vec::new();
+    for configuration in &study.configurations {
+        let name = configuration.backend.name();
+        if !configuration.backend.is_available() && !unrunnable.contains(&name) {
+            unrunnable.push(name);
+        }
+    }
+    let mut notes = Vec::new();
+    if !unrunnable.is_empty() {
+        notes.push(format!(
+            "not checked: the manifest's {} runs, which this build cannot run; to check them, \
+             {ENABLE_MPI}",
+            unrunnable.join(", ")
+        ));
+    }
+    let (old_features, new_features) = (
+        &old.info.environment.features,
+        &new.info.environment.features,
+    );
+    if old_features != new_features {
+        notes.push(format!(
+            "instruction counts not compared against the baseline: it was recorded by a build \
+             with features [{old_features}], this one has [{new_features}], and loading the MPI \
+             library changes every run's count"
+        ));
+    }
+    notes
 }
 
 /// The A/B verdicts: B's runs in `new` paired with A's, and A's instruction counts

@@ -20,6 +20,7 @@ pub fn markdown(
     rows: &[Row],
     ab: Option<&AbCheck>,
     timings_decide: bool,
+    notes: &[String],
 ) -> String {
     // In an A/B check its rows decide, and the baseline's are shown only.
     let (deciding, shown): (Vec<&Row>, Vec<&Row>) = match ab {
@@ -44,6 +45,9 @@ pub fn markdown(
     );
     let _ = writeln!(out, "- manifest: `{}`", options.manifest.display());
     let _ = writeln!(out, "- this build (B): {}", describe(new_info));
+    for note in notes {
+        let _ = writeln!(out, "- {note}");
+    }
     if let Some(ab) = ab {
         write_ab(&mut out, options, ab);
     }

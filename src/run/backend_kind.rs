@@ -76,6 +76,11 @@ impl BackendKind {
         }
     }
 
+    /// Whether this build can run it: MPI needs the `mpi` cargo feature.
+    pub fn is_available(self) -> bool {
+        !self.capabilities().mpi || cfg!(feature = "mpi")
+    }
+
     /// Whether its runs are parallel: more than one worker is possible.
     pub fn is_parallel(self) -> bool {
         self.workers_flag().is_some()

@@ -641,11 +641,8 @@ pub const ENABLE_MPI: &str = "install OpenMPI and libclang (`sudo apt-get instal
 /// skipped with a one-line warning, and a study left with nothing to run is an error.
 fn runnable(study: &Study) -> anyhow::Result<Vec<&Configuration>> {
     let mut configurations: Vec<&Configuration> = study.configurations.iter().collect();
-    if cfg!(feature = "mpi") {
-        return Ok(configurations);
-    }
     let before = configurations.len();
-    configurations.retain(|c| !c.backend.capabilities().mpi);
+    configurations.retain(|c| c.backend.is_available());
     let skipped = before - configurations.len();
     if configurations.is_empty() {
         bail!(
