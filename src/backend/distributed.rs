@@ -982,6 +982,30 @@ mod tests {
         }
     }
 
+    /// A dense gas (packing 0.6, placed on a lattice, elastic and inelastic): its chains
+    /// are long and cross the slabs' edges every step.
+    #[test]
+    fn ranks_as_threads_give_the_serial_hash_for_a_dense_gas() {
+        for restitution in [1.0, 0.8] {
+            let mut spec = spec(Boundary::Periodic, restitution, 0.6);
+            if let SceneSource::Gas(gas) = &mut spec.scene {
+                gas.placement = crate::sim::scene::Placement::Lattice;
+                gas.radius = RadiusDistribution::Fixed(1.0);
+                gas.mass = MassRule::Fixed(1.0);
+            }
+            spec.method = MethodSpec::stepped(0.02, 200, Broadphase::Grid);
+            let reference = serial::run(&spec).unwrap().summary;
+            assert!(reference.pair_collisions > 1000, "{reference}");
+            for ranks in [2, 3, 4] {
+                let summary = run_on_threads(&spec, ranks).summary;
+                let case = format!("e = {restitution}, {ranks} ranks");
+                assert_eq!(summary.state_hash, reference.state_hash, "{case}");
+                assert_eq!(summary.pair_collisions, reference.pair_collisions, "{case}");
+                assert_eq!(summary.max_overlap, reference.max_overlap, "{case}");
+            }
+        }
+    }
+
     /// Up to 64 ranks, on boxes tall enough for them: an elastic gas of equal disks in
     /// a periodic box, and an inelastic gas of unequal disks between walls.
     #[test]
