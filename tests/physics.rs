@@ -288,6 +288,25 @@ fn an_elastic_gas_under_gravity_keeps_its_energy_to_t_1000() {
     }
 }
 
+/// The summary's `energy_relative_error` counts the energy in the field: the elastic gas
+/// under gravity falls, gaining 63% in kinetic energy in its first 100 time units, and
+/// keeps its total.
+#[test]
+fn the_summary_measures_the_energy_a_gas_under_gravity_conserves() {
+    let summary = crate::util::json_summary(&[
+        "simulate",
+        "experiments/scenes/gravity-gas.toml",
+        "--steps",
+        "2000",
+    ]);
+    let kinetic = ["kinetic_energy_initial", "kinetic_energy_final"]
+        .map(|field| summary[field].as_f64().unwrap());
+    let traded = (kinetic[1] - kinetic[0]).abs() / kinetic[0];
+    assert!(traded > 0.05, "the kinetic energy changes by {traded:.3}");
+    let error = summary["energy_relative_error"].as_f64().unwrap();
+    assert!(error.abs() < 1e-6, "energy_relative_error {error:.2e}");
+}
+
 /// Settled, the elastic gas under gravity has the barometric profile: its number density
 /// n falls with height with the scale height λ = kT/(m·g), kT the kinetic energy per disk.
 /// The disks crowd a little at the floor (packing 0.02), where by the second virial

@@ -22,9 +22,11 @@ use crate::backend::comm::RankTraffic;
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::{InjectedSlowdown, Method, PreparedRun};
 use crate::run::summary::RunSummary;
-use crate::sim::observe::{Observables, Thermodynamics, observe, state_hash, thermodynamics};
+use crate::sim::observe::{
+    Observables, Thermodynamics, observe, potential_energy, state_hash, thermodynamics,
+};
 use crate::sim::scene::PlacementError;
-use crate::sim::{Particles, StepCounters};
+use crate::sim::{Boundary, Particles, StepCounters};
 pub use crate::system::machine::{CpuScope, timed};
 use crate::system::machine::{LoopSeconds, cpu_seconds, usable_cpus};
 
@@ -303,9 +305,10 @@ impl Outcome {
             Some(collapse) => (collapse.steps, collapse.time),
             None => (prepared.steps, prepared.steps as f64 * prepared.params.dt),
         };
+        let physics = &prepared.scene.physics;
+        let last_potential = potential_energy(last, physics.gravity);
         let last = observe(last);
         let initial_energy = measured.initial.kinetic_energy;
-        let physics = &prepared.scene.physics;
         let thermo = thermodynamics(
             n,
             prepared.scene.domain.area(),
@@ -327,12 +330,31 @@ impl Outcome {
             collapse_guard: accuracy
                 .collapse_guard
                 .filter(|_| physics.restitution < 1.0),
-            // Only an elastic scene should conserve its energy.
-            energy_relative_error: (physics.is_elastic() && initial_energy > 0.0)
-                .then(|| (last.kinetic_energy - initial_energy) / initial_energy),
+            energy_relative_error: conserved_energy_error(
+                prepared,
+                [initial_energy, last.kinetic_energy],
+                last_potential,
+            ),
             last,
         }
     }
+}
+
+/// (E_final − E_initial)/E_initial of the energy a scene should conserve: kinetic plus,
+/// in a field, potential energy. `None` where it need not be conserved: collisions that
+/// lose energy, or a field in a periodic box, where a disk crossing the edge jumps in
+/// height; and where E_initial is not positive.
+fn conserved_energy_error(
+    prepared: &PreparedRun,
+    [initial_kinetic, last_kinetic]: [f64; 2],
+    last_potential: f64,
+) -> Option<f64> {
+    let scene = &prepared.scene;
+    let field_in_periodic_box =
+        scene.physics.gravity.is_some() && scene.domain.boundary == Boundary::Periodic;
+    let initial = initial_kinetic + prepared.initial.potential_energy;
+    (scene.physics.is_elastic() && !field_in_periodic_box && initial > 0.0)
+        .then(|| (last_kinetic + last_potential - initial) / initial)
 }
 
 /// Missed collisions as a fraction of all that should have happened; `None` when

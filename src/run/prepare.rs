@@ -5,6 +5,7 @@
 use crate::run::auto::choose;
 use crate::run::spec::{DEFAULT_TC_FRACTION, InitialFigures, PreparedRun, RunSpec, SceneSource};
 use crate::sim::event::EventParams;
+use crate::sim::observe::potential_energy;
 use crate::sim::scene::PlacementError;
 use crate::sim::step::StepParams;
 
@@ -28,6 +29,7 @@ impl RunSpec {
                 packing: scene.packing(),
                 rms_speed: scene.particles.rms_speed(),
                 min_radius: scene.particles.min_radius(),
+                potential_energy: potential_energy(&scene.particles, scene.physics.gravity),
             },
             scene,
             params: StepParams {

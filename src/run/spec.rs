@@ -214,6 +214,9 @@ pub struct InitialFigures {
     pub packing: f64,
     pub rms_speed: f64,
     pub min_radius: f64,
+    /// The disks' energy in the field ([`crate::sim::observe::potential_energy`]); 0
+    /// without gravity.
+    pub potential_energy: f64,
 }
 
 impl PreparedRun {
