@@ -436,8 +436,8 @@ fn speedup_notes(out: &mut String, setup: &Setup, sent: bool) {
         let _ = writeln!(
             out,
             "Messages/step and KiB/step: what the MPI rank that sent most sent per step of \
-             the stepping loop (median of the repetitions), each collective counted as MPI's \
-             linear algorithms send it (see `messages_per_step_max` in docs/records.md).\n"
+             the stepping loop (median of the repetitions), counted as MPI's algorithms \
+             send them (see `messages_per_step_max` in docs/records.md).\n"
         );
     }
     if setup.drawn {

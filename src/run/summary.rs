@@ -64,8 +64,8 @@ pub struct RunSummary {
     /// Seconds of `wall_s` exchanging data between MPI ranks (0 without MPI).
     pub communication_s: f64,
     /// MPI: messages one rank sent per step of the stepping loop, the rank that sent most
-    /// (a collective's messages are counted as MPI's linear algorithms send them: see
-    /// `backend::comm::Communicator`); null for serial and rayon.
+    /// (counted as MPI's algorithms send them: see `backend::comm::Communicator`); null
+    /// for serial and rayon.
     #[serde(default)]
     pub messages_per_step_max: Option<f64>,
     /// MPI: messages one rank sent per step, the mean over ranks; null for serial and rayon.
