@@ -2,19 +2,19 @@
 //! that gives the serial bits for any rank count.
 //!
 //! Each rank owns a slab of whole strips (cut so that the initial disks are shared out
-//! evenly; counts need not divide the box). Per step a rank moves its disks, and the
-//! ranks decide together, by the serial stepper's rule, whether to rebuild their lists:
-//! then each refreshes its strips and hands the disks that left its slab to their new
-//! owners (migration); otherwise the disks that escaped the lists are served by queries
-//! on every rank whose strips they may reach (reported in the same gather). Each rank
-//! sends the disks of its first strip to the rank below as ghosts (halo), and finds the
-//! pairs its strips scan (its last strip scans the ghosts above it). Chains of contacts
-//! with no ghost, no other rank's escapee and no disk another rank sees (exported or
-//! reported) are the rank's alone and resolved there, in canonical order. Every other
-//! chain may span ranks: its contacts (with both disks' states) are gathered on every
-//! rank, which resolve them all in canonical order and keep the new state of their own
-//! disks. So every chain sees its contacts in the serial order, which is why the bits
-//! agree.
+//! evenly; counts need not divide the box) and talks in a step to its peers, the ranks
+//! beside it. Per step a rank moves its disks, and the ranks decide together, in one
+//! small all-reduce, whether to rebuild their lists: then each refreshes its strips and
+//! hands the disks that left its slab to their new owners (migration); otherwise the
+//! disks that escaped the lists are served by queries, on every peer whose strips they
+//! may reach. Each rank sends the disks of its first strip to the rank below as ghosts
+//! (halo), and finds the pairs its strips scan (its last strip scans the ghosts above
+//! it). Chains of contacts with no ghost, no other rank's escapee and no disk another
+//! rank sees (exported or reported) are the rank's alone and resolved there, in
+//! canonical order. Every other chain may span ranks: the ranks that hold it resolve it,
+//! in canonical order, from their own and their peers' contacts (`backend::shared`), or,
+//! when it reaches past the peers, every rank from all ranks' gathered contacts. So every
+//! chain sees its contacts in the serial order, which is why the bits agree.
 
 use std::collections::{HashMap, HashSet};
 use std::ops::{ControlFlow, Range};
