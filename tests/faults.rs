@@ -237,9 +237,12 @@ fn a_hard_kill_of_collide_run_takes_its_measurement_child_with_it() {
         study.kill().unwrap(); // SIGKILL: no handler runs.
         study.wait().unwrap();
         let killed = Instant::now();
+        // The run would last a minute; its launcher and ranks end within a second on an
+        // idle machine, and took over 5 s once while the rest of the suite (ranks as
+        // threads, up to 64 of them) kept both cores busy.
         while !processes_mentioning(scene).is_empty() {
             assert!(
-                killed.elapsed() < Duration::from_secs(5),
+                killed.elapsed() < Duration::from_secs(20),
                 "{backend}: processes outlived collide run: {:?}",
                 processes_mentioning(scene)
             );
