@@ -29,8 +29,7 @@ use crate::backend::{
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
 use crate::sim::grid::{
-    Contact, Mover, StripGrid, StripLayout, order_canonically, receive_band, refresh_band,
-    sort_movers,
+    Contact, Mover, StripGrid, StripLayout, receive_band, refresh_band, sort_movers,
 };
 use crate::sim::neighbours::{PairList, Skin, with_reorder_scratch};
 use crate::sim::observe::{Observables, observe};
@@ -444,41 +443,50 @@ impl RankState {
         let theirs = timed(&mut stages.communication, || {
             self.swap_with_peers(comm, &mine)
         });
+        let (grid, hood, owner, reach) =
+            (&self.grid, &self.hood, &self.owner, self.skin.patch_reach());
+        let chains = SharedChains {
+            hood,
+            query_is_near: |y, radius| {
+                (grid.strips_queried(y, radius, reach, &self.domain))
+                    .all(|strip| hood.is_near(owner[strip]))
+            },
+            domain: &self.domain,
+            physics: &self.physics,
+            dt,
+        };
+        // Without shared contacts here or at a peer, no own disk is in a shared chain.
+        let any = !mine.is_empty() || theirs.iter().any(|buffer| !buffer.is_empty());
+        let own_slots = match any {
+            true => self.own_shared_slots(),
+            false => HashMap::new(),
+        };
         let resolution = timed(&mut stages.collisions, || {
             let mut buffers = vec![&mine[..]];
             buffers.extend(theirs.iter().map(Vec::as_slice));
-            let (grid, hood, owner, reach) =
-                (&self.grid, &self.hood, &self.owner, self.skin.patch_reach());
-            let chains = SharedChains {
-                hood,
-                query_is_near: |y, radius| {
-                    (grid.strips_queried(y, radius, reach, &self.domain))
-                        .all(|strip| hood.is_near(owner[strip]))
-                },
-                domain: &self.domain,
-                physics: &self.physics,
-                dt,
-            };
-            chains.resolve_closed_chains(&buffers, &self.own_shared_slots())
+            chains.resolve_closed_chains(&buffers, &own_slots)
         });
         let open = timed(&mut stages.communication, || {
             comm.max_all(&[f64::from(resolution.is_none())])[0] > 0.0
         });
-        match resolution.filter(|_| !open) {
-            Some(resolution) => {
-                resolution.apply(&mut self.particles);
-                self.counters.merge(&resolution.counters);
-                self.particles.truncate(self.n_own);
-            }
+        let counters = match open {
+            false => &mut self.counters,
+            // Every rank resolves every chain: counted once, as rank 0's.
+            true => &mut self.shared_counters,
+        };
+        let resolution = match resolution.filter(|_| !open) {
+            Some(resolution) => resolution,
             None => {
-                let shared = timed(&mut stages.communication, || {
-                    comm.all_gather(&self.pack_shared())
-                });
+                let all = timed(&mut stages.communication, || comm.all_gather(&mine));
                 timed(&mut stages.collisions, || {
-                    self.resolve_shared_chains(&shared, dt)
-                });
+                    let buffers: Vec<&[f64]> = all.iter().map(Vec::as_slice).collect();
+                    chains.resolve_all_chains(&buffers, &own_slots)
+                })
             }
-        }
+        };
+        resolution.apply(&mut self.particles);
+        counters.merge(&resolution.counters);
+        self.particles.truncate(self.n_own);
     }
 
     /// The shared contacts, both disks of each, with their owner and how other ranks saw
@@ -844,60 +852,6 @@ impl RankState {
             &mut self.counters,
             |_| {},
         );
-    }
-
-    /// Both disks of every shared contact, packed: the input of every rank's
-    /// [`RankState::resolve_shared_chains`].
-    fn pack_shared(&self) -> Vec<f64> {
-        let mut packed = Vec::with_capacity(self.shared.len() * 2 * PACKED_LEN);
-        for contact in &self.shared {
-            self.particles.pack(contact.a as usize, &mut packed);
-            self.particles.pack(contact.b as usize, &mut packed);
-        }
-        packed
-    }
-
-    /// Resolves the shared contacts of all ranks in canonical order (the same work on
-    /// every rank), keeps the new state of this rank's disks, and drops the ghosts.
-    fn resolve_shared_chains(&mut self, shared: &[Vec<f64>], dt: f64) {
-        // The shared disks, once each, stored locally; the pairs by local index.
-        let mut disks = Particles::default();
-        let mut slot_of: HashMap<u32, u32> = HashMap::new();
-        let mut contacts: Vec<Contact> = Vec::new();
-        for packed in shared {
-            for pair in packed.chunks_exact(2 * PACKED_LEN) {
-                let (a, b) = pair.split_at(PACKED_LEN);
-                let [slot_a, slot_b] = [a, b].map(|record| {
-                    *slot_of.entry(record[0] as u32).or_insert_with(|| {
-                        disks.unpack_append(record);
-                        (disks.len() - 1) as u32
-                    })
-                });
-                contacts.push(Contact::new(slot_a as usize, slot_b as usize));
-            }
-        }
-        // Canonical order: every rank resolves the same list the same way. A pair of an
-        // escapee may have been found by two ranks: resolved once.
-        order_canonically(&mut contacts, &disks.id, &mut Vec::new());
-        resolve_contacts(
-            &mut disks,
-            &self.domain,
-            &self.physics,
-            dt,
-            &contacts,
-            &mut self.shared_counters,
-            |_| {},
-        );
-        let own_slots = self.own_shared_slots();
-        for (slot, id) in disks.id.iter().enumerate() {
-            if let Some(&idx) = own_slots.get(id) {
-                self.particles.x[idx] = disks.x[slot];
-                self.particles.y[idx] = disks.y[slot];
-                self.particles.vx[idx] = disks.vx[slot];
-                self.particles.vy[idx] = disks.vy[slot];
-            }
-        }
-        self.particles.truncate(self.n_own);
     }
 }
 

@@ -261,30 +261,59 @@ impl<Q: Fn(f64, f64) -> bool> SharedChains<'_, Q> {
             .filter(|contact| has_own[chain[contact.a as usize]])
             .partition(|contact| counted_by[chain[contact.a as usize]].1 == me);
         let mut resolution = Resolution::default();
-        let mut keyed = Vec::new();
-        let mut ignored = StepCounters::default();
-        for (contacts, counters) in [
-            (&mut counted, &mut resolution.counters),
-            (&mut uncounted, &mut ignored),
-        ] {
-            order_canonically(contacts, &gathered.disks.id, &mut keyed);
-            resolve_contacts(
-                &mut gathered.disks,
-                self.domain,
-                self.physics,
-                self.dt,
-                contacts,
-                counters,
-                |_| {},
-            );
-        }
-        let disks = &gathered.disks;
-        for (slot, id) in disks.id.iter().enumerate() {
-            if let Some(&idx) = own_slot.get(id) {
-                let state = [disks.x[slot], disks.y[slot], disks.vx[slot], disks.vy[slot]];
-                resolution.updates.push((idx, state));
-            }
-        }
+        self.resolve_in_order(&mut gathered.disks, &mut counted, &mut resolution.counters);
+        self.resolve_in_order(
+            &mut gathered.disks,
+            &mut uncounted,
+            &mut StepCounters::default(),
+        );
+        resolution.updates = own_updates(&gathered.disks, own_slot);
         Some(resolution)
     }
+
+    /// Resolves every chain of `buffers` (all ranks' shared contacts, the same on every
+    /// rank) in canonical order, counting them all: what the ranks do together when a
+    /// chain reaches past the peers.
+    pub fn resolve_all_chains(
+        &self,
+        buffers: &[&[f64]],
+        own_slot: &HashMap<u32, usize>,
+    ) -> Resolution {
+        let mut gathered = Gathered::of(buffers);
+        let mut resolution = Resolution::default();
+        let contacts = &mut gathered.contacts;
+        self.resolve_in_order(&mut gathered.disks, contacts, &mut resolution.counters);
+        resolution.updates = own_updates(&gathered.disks, own_slot);
+        resolution
+    }
+
+    /// Resolves `contacts` (whole chains) among `disks` in canonical order, a pair found
+    /// twice once.
+    fn resolve_in_order(
+        &self,
+        disks: &mut Particles,
+        contacts: &mut Vec<Contact>,
+        counters: &mut StepCounters,
+    ) {
+        order_canonically(contacts, &disks.id, &mut Vec::new());
+        resolve_contacts(
+            disks,
+            self.domain,
+            self.physics,
+            self.dt,
+            contacts,
+            counters,
+            |_| {},
+        );
+    }
+}
+
+/// The new states of the own disks among `disks`, found at `own_slot[id]`.
+fn own_updates(disks: &Particles, own_slot: &HashMap<u32, usize>) -> Vec<(usize, [f64; 4])> {
+    (disks.id.iter().enumerate())
+        .filter_map(|(slot, id)| {
+            let state = [disks.x[slot], disks.y[slot], disks.vx[slot], disks.vy[slot]];
+            own_slot.get(id).map(|&idx| (idx, state))
+        })
+        .collect()
 }
