@@ -2,7 +2,10 @@
 //! all summarise repetitions by it), seeded bootstrap confidence intervals of the ratio
 //! of two medians and of the median of paired ratios, and the timing check's verdict as a pure function of that interval and a noise
 //! threshold (criterion.rs' `compare_to_threshold`). No I/O and no clock: the same
-//! numbers give the same answer.
+//! numbers give the same answer. The statistics of a run's observables as a time series
+//! (equilibration cut, blocked errors, replicas) are in [`series`].
+
+pub mod series;
 
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
