@@ -3,8 +3,10 @@
 //! of two medians and of the median of paired ratios, and the timing check's verdict as a pure function of that interval and a noise
 //! threshold (criterion.rs' `compare_to_threshold`). No I/O and no clock: the same
 //! numbers give the same answer. The statistics of a run's observables as a time series
-//! (equilibration cut, blocked errors, replicas) are in [`series`].
+//! (equilibration cut, blocked errors, replicas) are in [`series`], applied to a run's
+//! block series in [`observables`].
 
+pub mod observables;
 pub mod series;
 
 use rand::{RngExt, SeedableRng};

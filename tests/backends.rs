@@ -4,6 +4,7 @@ use std::num::NonZeroUsize;
 
 use collide::backend::{serial, threads};
 use collide::run::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
+use collide::run::summary::RunSummary;
 use collide::sim::scene::{GasSpec, MassRule, RadiusDistribution};
 use collide::sim::{Boundary, Broadphase, Physics};
 
@@ -58,9 +59,36 @@ fn rayon_at_1_2_3_4_and_8_threads_gives_the_serial_hash() {
             assert_eq!(summary.pair_collisions, reference.pair_collisions, "{name}");
             assert_eq!(summary.wall_collisions, reference.wall_collisions, "{name}");
             assert_eq!(summary.max_overlap, reference.max_overlap, "{name}");
+            assert_eq!(
+                observable_bits(&summary),
+                observable_bits(&reference),
+                "{name}, {n} threads: the observables from the block series"
+            );
+            assert_eq!(summary.equilibrated, reference.equilibrated, "{name}");
             assert_eq!((summary.threads, summary.ranks), (n, 1));
         }
     }
+}
+
+/// The bits of every observable the summary computes from the block series (the
+/// virial's blocks, the collision counts and the kinetic-energy integrals): equal bits
+/// here mean equal series, cut and error bars.
+fn observable_bits(summary: &RunSummary) -> Vec<Option<u64>> {
+    [
+        summary.compressibility_z,
+        summary.compressibility_z_from_zero,
+        summary.compressibility_z_se,
+        summary.compressibility_z_g,
+        summary.equilibration_cut_time,
+        summary.collision_rate,
+        summary.collision_rate_se,
+        summary.temperature,
+        summary.temperature_se,
+        summary.pressure,
+    ]
+    .iter()
+    .map(|value| value.map(f64::to_bits))
+    .collect()
 }
 
 /// Steps of over half a radius for the rms disk: disks escape the neighbour lists

@@ -23,10 +23,12 @@ use crate::run::backend_kind::BackendKind;
 use crate::run::spec::{InjectedSlowdown, Method, PreparedRun};
 use crate::run::summary::RunSummary;
 use crate::sim::observe::{
-    Observables, Thermodynamics, observe, potential_energy, state_hash, thermodynamics,
+    Block, Observables, Thermodynamics, ends_interval, observe, potential_energy, state_hash,
+    thermodynamics,
 };
 use crate::sim::scene::PlacementError;
 use crate::sim::{Boundary, Particles, StepCounters};
+use crate::stats::observables::analyse;
 pub use crate::system::machine::{CpuScope, timed};
 use crate::system::machine::{LoopSeconds, cpu_seconds, usable_cpus};
 
@@ -188,16 +190,16 @@ pub struct Collapse {
     pub steps: u64,
 }
 
+    /// The run's observables in up to `SERIES_BLOCKS` blocks (serial and rayon: the same
+    /// bits).
+    pub series: Option<Vec<Block>>,
 /// Samples of the temperature curve after t = 0.
 pub const CURVE_SAMPLES: u64 = 40;
 
 /// The steps after which the temperature curve is sampled: up to [`CURVE_SAMPLES`],
 /// evenly spread, the last one the final step.
 pub fn is_curve_sample(step: u64, steps: u64) -> bool {
-    let samples = CURVE_SAMPLES.min(steps);
-    // Step k (1-based) is a sample when ⌊k·samples/steps⌋ moves on: `samples` of them,
-    // the last at k = steps.
-    step * samples / steps != (step - 1) * samples / steps
+    ends_interval(step, steps, CURVE_SAMPLES)
 }
 
 /// The summary of a finished run; `last` is the whole final state in any storage order.
@@ -224,6 +226,15 @@ pub fn summarize(
         ranks: workers.ranks,
         oversubscribed: workers.threads * workers.ranks > usable_cpus(),
         boundary: prepared.scene.domain.boundary.name().to_owned(),
+    // The observables after the equilibration cut, where the backend recorded a series.
+    let observed = accuracy
+        .series
+        .as_deref()
+        .and_then(|blocks| analyse(blocks, outcome.n));
+    // After the cut where the run settled, else from t = 0 (flagged: not equilibrated).
+    let production = observed.and_then(|o| o.settled);
+    let means = production.or(observed.map(|o| o.from_zero));
+    let area = prepared.scene.domain.area();
         broadphase: prepared.params.broadphase.name().to_owned(),
         packing: prepared.initial.packing,
         seed: prepared.seed,
@@ -259,12 +270,29 @@ pub fn summarize(
         events_per_s: outcome
             .is_event
             .then(|| (counters.pair_collisions + counters.wall_collisions) as f64 / wall_s),
-        collision_rate: Some(
+        collision_rate: means.map(|p| p.collision_rate.mean).or(Some(
             2.0 * counters.pair_collisions as f64 / (outcome.n.max(1) as f64 * outcome.duration),
-        ),
-        temperature: Some(outcome.thermo.temperature),
-        pressure: Some(outcome.thermo.pressure),
-        compressibility_z: outcome.thermo.compressibility_z,
+        )),
+        temperature: means
+            .map(|p| p.temperature.mean)
+            .or(Some(outcome.thermo.temperature)),
+        pressure: means
+            .map(|p| p.compressibility_z.mean * outcome.n as f64 * p.temperature.mean / area)
+            .or(Some(outcome.thermo.pressure)),
+        compressibility_z: means
+            .map(|p| p.compressibility_z.mean)
+            .or(outcome.thermo.compressibility_z),
+        equilibrated: observed.map(|o| o.settled.is_some()),
+        equilibration_cut_time: production.map(|p| p.cut_time),
+        compressibility_z_from_zero: observed.map(|o| o.from_zero.compressibility_z.mean),
+        compressibility_z_se: production.map(|p| p.compressibility_z.se),
+        compressibility_z_g: production.map(|p| p.compressibility_z.g),
+        compressibility_z_n_eff: production.map(|p| p.compressibility_z.n_eff()),
+        compressibility_z_plateau: production.map(|p| p.compressibility_z.plateau),
+        collision_rate_se: production.map(|p| p.collision_rate.se),
+        collision_rate_g: production.map(|p| p.collision_rate.g),
+        temperature_se: production.map(|p| p.temperature.se),
+        temperature_g: production.map(|p| p.temperature.g),
         missed_collisions: outcome.missed,
         missed_collision_fraction: missed_fraction(outcome.missed, counters.pair_collisions),
         mean_overlap: (counters.pair_collisions > 0)

@@ -13,7 +13,9 @@ use crate::run::backend_kind::BackendKind;
 use crate::run::spec::{Method, Observe, PreparedRun, RunSpec};
 use crate::sim::Stepper;
 use crate::sim::event::EventSim;
-use crate::sim::observe::{MissedCollisions, observe, temperature};
+use crate::sim::observe::{
+    MissedCollisions, SERIES_BLOCKS, SeriesRecorder, ends_interval, observe, temperature,
+};
 use crate::sim::{Particles, Physics, StepCounters};
 use crate::system::machine::LoopSeconds;
 
@@ -54,6 +56,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
     let wall_s = seconds.wall - apart;
     let cpu_s = seconds.cpu.map(|cpu| cpu - apart);
     accuracy.temperature_curve = curve.points;
+    accuracy.series = Some(curve.series.blocks());
     let measured = Measured {
         setup_s,
         wall_s,
@@ -115,6 +118,7 @@ fn step_method(
         }
         curve.sample(prepared, step, particles);
         draw_step(offscreen, particles);
+        curve.close_block(prepared, step, &stepper.counters(), particles);
         ControlFlow::Continue(())
     });
     let accuracy = Accuracy {
@@ -151,11 +155,13 @@ fn event_method(
             Some(time) => {
                 curve.push(time, particles);
                 collapse = Some(Collapse { time, steps: step });
+                curve.close_block_at(time, &sim.counters(), particles);
                 ControlFlow::Break(())
             }
             None => {
                 curve.sample(prepared, step, particles);
                 ControlFlow::Continue(())
+                curve.close_block(prepared, step, &sim.counters(), particles);
             }
         }
     });
@@ -167,12 +173,14 @@ fn event_method(
     (setup_s, seconds, sim.counters(), accuracy)
 }
 
-/// The temperature curve [t, kinetic energy per disk], and the seconds spent observing.
+/// The temperature curve [t, kinetic energy per disk], the observables' block series,
+/// and the seconds spent observing.
 struct Curve {
     /// `None` in an elastic scene, whose temperature stays where it started: a point
     /// reads every disk (at 10⁶ disks and 50 steps, 40 points took a fifth of the run).
     points: Option<Vec<[f64; 2]>>,
     seconds: f64,
+    series: SeriesRecorder,
 }
 
 impl Curve {
@@ -180,10 +188,31 @@ impl Curve {
         Curve {
             points: (!physics.is_elastic()).then(|| vec![[0.0, temperature(particles)]]),
             seconds: 0.0,
+            series: SeriesRecorder::new(observe(particles).kinetic_energy, physics),
         }
     }
 
     /// Records a point after `step` if it is one of the sampled steps.
+    /// Closes a block of the series after `step` if it ends one.
+    fn close_block(
+        &mut self,
+        prepared: &PreparedRun,
+        step: u64,
+        counters: &StepCounters,
+        particles: &Particles,
+    ) {
+        if ends_interval(step, prepared.steps, SERIES_BLOCKS) {
+            self.close_block_at(step as f64 * prepared.params.dt, counters, particles);
+        }
+    }
+
+    /// Closes a block of the series at `time`.
+    fn close_block_at(&mut self, time: f64, counters: &StepCounters, particles: &Particles) {
+        timed(&mut self.seconds, || {
+            self.series.close_block(time, counters, particles)
+        });
+    }
+
     fn sample(&mut self, prepared: &PreparedRun, step: u64, particles: &Particles) {
         if is_curve_sample(step, prepared.steps) {
             self.push(step as f64 * prepared.params.dt, particles);

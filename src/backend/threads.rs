@@ -31,7 +31,7 @@ use crate::sim::grid::{
 use crate::sim::neighbours::{
     DISPLACEMENT_BLOCK, Displacements, PairList, Skin, with_reorder_scratch,
 };
-use crate::sim::observe::observe;
+use crate::sim::observe::{SERIES_BLOCKS, SeriesRecorder, ends_interval, observe};
 use crate::sim::pieces::{InTurn, MIN_STREAMING_PIECE, Pieces};
 use crate::sim::prefetch::prefetch;
 use crate::sim::resolve::resolve_contacts;
@@ -78,12 +78,21 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
     let initial = observe(&particles);
     let mut offscreen = Offscreen::when(spec.method.draw, &prepared.scene.domain, &particles);
 
+    // The observables' blocks, recorded out of both clocks (as the serial backend does).
+    let mut series = SeriesRecorder::new(initial.kinetic_energy, &scene.physics);
+    let mut series_s = 0.0;
     let (setup_s, seconds) = pool.install(|| {
         with_team(|team| {
             stepper.build_lists(&mut particles, team);
             let setup_s = setup_start.elapsed().as_secs_f64();
-            let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Process, |_| {
+            let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Process, |step| {
                 stepper.step(&mut particles, team);
+                if ends_interval(step, prepared.steps, SERIES_BLOCKS) {
+                    let time = step as f64 * prepared.params.dt;
+                    timed(&mut series_s, || {
+                        series.close_block(time, &stepper.counters, &particles)
+                    });
+                }
                 // The snapshot and the rasterizer are serial: drawing runs on this thread.
                 draw_step(&mut offscreen, &particles);
                 ControlFlow::Continue(())
@@ -95,7 +104,7 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
     // Drawing is out of both clocks: its own seconds (CPU the pool's waiting threads
     // spend spinning before they sleep stays in `cpu_s`).
     let draw_s = offscreen.map(|offscreen| offscreen.seconds);
-    let apart = draw_s.unwrap_or(0.0);
+    let apart = draw_s.unwrap_or(0.0) + series_s;
     let measured = Measured {
         setup_s,
         wall_s: seconds.wall - apart,
@@ -103,7 +112,10 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
         stages: stepper.stages,
         counters: stepper.counters,
         initial,
-        accuracy: Accuracy::default(),
+        accuracy: Accuracy {
+            series: Some(series.blocks()),
+            ..Accuracy::default()
+        },
         draw_s,
         traffic: None,
     };

@@ -5,6 +5,8 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
+use crate::stats::observables::MIN_EFFECTIVE_POINTS;
+
 /// One run's measurements. Field names are a public interface: scripts and the study
 /// driver read them. Times are wall-clock seconds.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -132,6 +134,41 @@ pub struct RunSummary {
     /// missed_collisions / (missed_collisions + pair_collisions), null when either is.
     #[serde(default)]
     pub missed_collision_fraction: Option<f64>,
+    /// Whether the run's observables settled: true when the block series was cut (by
+    /// MSER-5) and collision_rate, temperature, pressure and compressibility_z are means
+    /// after the cut; false ("not equilibrated: run longer") when they are averages from
+    /// t = 0; null where no series was recorded (MPI, a state at rest).
+    #[serde(default)]
+    pub equilibrated: Option<bool>,
+    /// Simulated time cut from the start as the transient (null unless equilibrated).
+    #[serde(default)]
+    pub equilibration_cut_time: Option<f64>,
+    /// Z averaged from t = 0, transient included (null where no series was recorded).
+    #[serde(default)]
+    pub compressibility_z_from_zero: Option<f64>,
+    /// Standard error of compressibility_z from blocking the production blocks (null
+    /// unless equilibrated).
+    #[serde(default)]
+    pub compressibility_z_se: Option<f64>,
+    /// Statistical inefficiency g of Z's blocks (Geyer), ≥ 1: blocks per independent one.
+    #[serde(default)]
+    pub compressibility_z_g: Option<f64>,
+    /// Production blocks / g: independent points Z is worth (under 50: flagged).
+    #[serde(default)]
+    pub compressibility_z_n_eff: Option<f64>,
+    /// Whether the blocking curve of Z reached a plateau (false: the SE may be too small).
+    #[serde(default)]
+    pub compressibility_z_plateau: Option<bool>,
+    /// Standard error and statistical inefficiency of collision_rate (as for Z).
+    #[serde(default)]
+    pub collision_rate_se: Option<f64>,
+    #[serde(default)]
+    pub collision_rate_g: Option<f64>,
+    /// Standard error and statistical inefficiency of temperature (as for Z).
+    #[serde(default)]
+    pub temperature_se: Option<f64>,
+    #[serde(default)]
+    pub temperature_g: Option<f64>,
     /// Mean overlap of the pairs that received an impulse, as a fraction of their contact
     /// distance (rounding-sized for the event method); null without pair collisions.
     #[serde(default)]
@@ -323,6 +360,60 @@ impl RunSummary {
         writeln!(
             f,
             "accuracy   collision rate {}, pressure {}, Z {}, missed {} (fraction {}), mean overlap {}",
+    /// The equilibration cut and the error bars of the observables, with the warnings.
+    fn write_equilibration(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match (
+            self.equilibrated,
+            self.compressibility_z,
+            self.compressibility_z_se,
+        ) {
+            (Some(true), Some(z), Some(se)) => {
+                writeln!(
+                    f,
+                    "equilibrium cut at t = {:.4e} (MSER-5); Z = {z:.5} ± {se:.5} (g = {:.2}, \
+                     N_eff = {:.0}; from t = 0: {})",
+                    self.equilibration_cut_time.unwrap_or(0.0),
+                    self.compressibility_z_g.unwrap_or(f64::NAN),
+                    self.compressibility_z_n_eff.unwrap_or(f64::NAN),
+                    self.compressibility_z_from_zero
+                        .map_or_else(|| "n/a".to_owned(), |z| format!("{z:.5}")),
+                )?;
+                for warning in self.equilibration_warnings() {
+                    writeln!(f, "warning    {warning}")?;
+                }
+                Ok(())
+            }
+            (Some(false), ..) => writeln!(
+                f,
+                "equilibrium not equilibrated: run longer (the observables above are averages \
+                 from t = 0, transient included)"
+            ),
+            _ => Ok(()),
+        }
+    }
+
+    /// Sentences flagging an error bar that cannot be trusted: too few independent
+    /// points, or no plateau in the blocking curve.
+    pub fn equilibration_warnings(&self) -> Vec<String> {
+        let mut warnings = Vec::new();
+        if let Some(n_eff) = self.compressibility_z_n_eff
+            && n_eff < MIN_EFFECTIVE_POINTS
+        {
+            warnings.push(format!(
+                "Z is worth {n_eff:.0} independent points (under {MIN_EFFECTIVE_POINTS:.0}): \
+                 its error bar is itself uncertain; run longer"
+            ));
+        }
+        if self.compressibility_z_plateau == Some(false) {
+            warnings.push(
+                "the blocking curve of Z has no plateau: its error bar may be too small; \
+                 run longer"
+                    .to_owned(),
+            );
+        }
+        warnings
+    }
+
             show(self.collision_rate),
             show(self.pressure),
             show(self.compressibility_z),
@@ -345,6 +436,7 @@ impl RunSummary {
             )?;
         }
         if let Some(choice) = &self.choice {
+        self.write_equilibration(f)?;
             writeln!(f, "chosen     {choice}")?;
         }
         Ok(())

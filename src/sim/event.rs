@@ -36,7 +36,7 @@ use super::calendar::EventCalendar;
 use super::cells::{CellGrid, NONE, Neighbour};
 use super::collapse::CollapseDetector;
 use super::collision::{PairSide, exchange_along};
-use super::counters::StepCounters;
+use super::counters::{StepCounters, virial_term};
 use super::particles::Particles;
 use super::scene::{Boundary, Domain, Physics};
 
@@ -469,7 +469,7 @@ impl EventSim {
         counters.pair_collisions += 1;
         counters.max_overlap = counters.max_overlap.max(overlap);
         counters.overlap_sum += overlap;
-        counters.virial += distance * impulse;
+        counters.virial += virial_term(distance * impulse);
         self.predict(a);
         self.predict(b);
     }

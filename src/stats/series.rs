@@ -8,6 +8,9 @@
 /// Points averaged into one MSER batch (White's MSER-5: raw MSER under-discards on noise).
 pub const MSER_BATCH: usize = 5;
 
+/// Fewest points MSER-5 cuts (four batches); fewer are not equilibrated.
+pub const MSER_MIN_POINTS: usize = 4 * MSER_BATCH;
+
 /// Where the production part of a series starts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Cut {
@@ -22,12 +25,12 @@ pub enum Cut {
 /// [`MSER_BATCH`], and the cut is the batch d that minimises the squared standard error
 /// of the remaining mean, Σ_{j≥d}(y_j − ȳ_d)²/(m − d)², the last few batches left out of
 /// the search (their few points make the statistic erratic). A minimum in the second
-/// half, or fewer than four batches, is [`Cut::NotEquilibrated`].
+/// half, or fewer than [`MSER_MIN_POINTS`] points, is [`Cut::NotEquilibrated`].
 pub fn mser5(series: &[f64]) -> Cut {
-    let m = series.len() / MSER_BATCH;
-    if m < 4 {
+    if series.len() < MSER_MIN_POINTS {
         return Cut::NotEquilibrated;
     }
+    let m = series.len() / MSER_BATCH;
     let batches: Vec<f64> = series
         .chunks_exact(MSER_BATCH)
         .map(|batch| batch.iter().sum::<f64>() / MSER_BATCH as f64)
