@@ -193,6 +193,61 @@ fn a_run_with_the_view_reaches_the_state_simulate_reaches_after_the_same_steps()
     }
 }
 
+/// Nobody can close a window on Xvfb: without `--frames` the view must end by itself
+/// once the scene's steps are shown (before, it drew the last state forever).
+#[test]
+fn on_a_virtual_display_without_frames_the_view_ends_after_the_scenes_steps() {
+    if !runs_here("view::on_a_virtual_display_without_frames_the_view_ends_after_the_scenes_steps")
+    {
+        return;
+    }
+    if std::env::var_os(UNDER_XVFB).is_none() {
+        // A real display: a user closes the window; nothing to check here.
+        return;
+    }
+    let dir = temp_dir();
+    let stats_path = dir.path().join("stats.json");
+    let stats_arg = stats_path.to_str().unwrap();
+    let args = [
+        "view",
+        "experiments/scenes/seed-1000.toml",
+        "--steps",
+        "40",
+        "--steps-per-frame",
+        "8",
+        "--max-fps",
+        "0",
+        "--size",
+        "120x100",
+        "--stats",
+        stats_arg,
+    ];
+    let mut child = Command::new(env!("CARGO_BIN_EXE_collide"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if std::time::Instant::now() > deadline {
+            child.kill().ok();
+            panic!("the view on Xvfb without --frames did not end within 60 s");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(status.success());
+    let mut said = String::new();
+    std::io::Read::read_to_string(&mut child.stdout.take().unwrap(), &mut said).unwrap();
+    assert!(said.contains("closes after the scene's 40 steps"), "{said}");
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats_path).unwrap()).unwrap();
+    assert_eq!(stats["steps"], 40);
+}
+
 #[test]
 fn without_a_display_the_view_exits_2_and_points_at_render() {
     let out = Command::new(env!("CARGO_BIN_EXE_collide"))

@@ -40,7 +40,7 @@
 //! and 152 in the first version (cells of one disk: fewer candidates, more cells visited).
 
 use collide::sim::collision::{PairSide, collide_pair};
-use collide::sim::{Boundary, Scene};
+use collide::sim::{Boundary, Physics, Scene};
 
 /// The disks in structure-of-arrays form.
 #[derive(Clone, Debug, Default)]
@@ -79,8 +79,7 @@ impl Grid {
 /// The skilled cell list: the disks (two sets of arrays, swapped every step) and its grid.
 pub struct CellListYardstick {
     dt: f64,
-    restitution: f64,
-    wall_restitution: f64,
+    physics: Physics,
     width: f64,
     height: f64,
     grid: Grid,
@@ -121,8 +120,7 @@ impl CellListYardstick {
         };
         CellListYardstick {
             dt,
-            restitution: scene.physics.restitution,
-            wall_restitution: scene.physics.wall_restitution,
+            physics: scene.physics,
             width: scene.domain.width,
             height: scene.domain.height,
             grid: Grid {
@@ -165,7 +163,7 @@ impl CellListYardstick {
     // Not inlined, here and in `sweep`, so that profiles show the two halves apart.
     #[inline(never)]
     fn sort_moved(&mut self) {
-        let (dt, grid, e_wall) = (self.dt, self.grid, self.wall_restitution);
+        let (dt, grid, e_wall) = (self.dt, self.grid, self.physics.wall_restitution);
         let d = &mut self.disks;
         let n = d.x.len();
         let (width, height) = (self.width, self.height);
@@ -214,7 +212,7 @@ impl CellListYardstick {
     /// cells above, resolving each overlapping, approaching pair as it is found.
     #[inline(never)]
     fn sweep(&mut self) {
-        let e = self.restitution;
+        let physics = self.physics;
         let d = &mut self.disks;
         let n = d.x.len();
         let (x, y, radius, mass) = (&d.x[..n], &d.y[..n], &d.radius[..n], &d.mass[..n]);
@@ -242,7 +240,8 @@ impl CellListYardstick {
                             let (dx, dy) = (xj - xi, yj - yi);
                             let contact = ri + rj;
                             if dx * dx + dy * dy < contact * contact {
-                                let hit = impulse(e, i, from + k, dx, dy, contact, mass, vx, vy);
+                                let hit =
+                                    impulse(&physics, i, from + k, dx, dy, contact, mass, vx, vy);
                                 impulses += u64::from(hit);
                             }
                         }
@@ -262,7 +261,7 @@ impl CellListYardstick {
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
 fn impulse(
-    e: f64,
+    physics: &Physics,
     a: usize,
     b: usize,
     dx: f64,
@@ -278,7 +277,7 @@ fn impulse(
         vy: vy[i],
     };
     let (a_side, b_side) = (side(a, vx, vy), side(b, vx, vy));
-    match collide_pair(e, dx, dy, contact, a_side, b_side) {
+    match collide_pair(physics, dx, dy, contact, a_side, b_side) {
         (_, Some([[vax, vay], [vbx, vby]])) => {
             (vx[a], vy[a], vx[b], vy[b]) = (vax, vay, vbx, vby);
             true

@@ -49,9 +49,8 @@ pub struct Measured {
 /// `cargo bench --features mpi --bench kernels -- '^(step|event)/'` on one idle machine
 /// (docs/accuracy.md, Choosing automatically), both methods in the same runs so that
 /// their rates compare even where the machine differs: the median of three runs within
-/// 10 minutes (2026-11-26, 22:25–22:35 UTC, an AMD EPYC VM; the runs differed by up to
-/// 5% in the step rates, 50% in the event rates at 10⁵ and threefold in the observation
-/// rates at 10⁵).
+/// ten minutes on a 2-core AMD EPYC VM (the runs differed by up to 5% in the step rates,
+/// 50% in the event rates at 10⁵ and threefold in the observation rates at 10⁵).
 /// By N (rows), packing 0.05 then 0.3.
 pub const MEASURED: [[Measured; 2]; 3] = [
     [

@@ -405,8 +405,11 @@ impl Validator<'_> {
     }
 
     fn physics(&self, raw: &RawScene) -> Result<Physics, SceneFileError> {
-        let coefficient = |value: &Option<Spanned<f64>>, field: &str| match self.in_file(value) {
-            None => Ok(1.0),
+        let default = Physics::default();
+        let coefficient = |value: &Option<Spanned<f64>>, field: &str, absent: f64| match self
+            .in_file(value)
+        {
+            None => Ok(absent),
             Some(Sourced { value, origin }) if !(0.0..=1.0).contains(&value) => Err(self.invalid(
                 origin,
                 field,
@@ -415,10 +418,14 @@ impl Validator<'_> {
             )),
             Some(Sourced { value, .. }) => Ok(value),
         };
-        let restitution = coefficient(&raw.restitution, "scene.restitution")?;
-        let wall_restitution = coefficient(&raw.wall_restitution, "scene.wall_restitution")?;
+        let restitution = coefficient(&raw.restitution, "scene.restitution", default.restitution)?;
+        let wall_restitution = coefficient(
+            &raw.wall_restitution,
+            "scene.wall_restitution",
+            default.wall_restitution,
+        )?;
         let gravity = match self.in_file(&raw.gravity) {
-            None => None,
+            None => default.gravity,
             Some(Sourced { value, origin }) => {
                 let [gx, gy] =
                     self.pair(&value, origin, "scene.gravity", "gravity = [0.0, -9.81]")?;

@@ -231,16 +231,12 @@ impl PreparedRun {
 // figure is peak resident memory over N at N = 10⁷ (`/usr/bin/time -v collide simulate
 // experiments/scenes/seed-1000.toml --n 10000000 --packing 0.3 --steps 10 --seed 42`) on
 // a 2-core x86-64 Linux machine, release build, with the neighbour-list broad phase:
-// 126 B per disk serial and 140 B with rayon on 2 threads (2026-11-23); 114 B and 126 B
-// since the strip grid's entries shrank to 16 bytes (2026-11-24); 82 B and 94 B since
-// equal disks hold their radius and mass once, with 12-byte entries and f32 build
-// positions, and 99 B and 112 B for radii from 0.5 to 1.5 with equal masses (2026-11-24,
-// 20:38 UTC); masses by area add an array, 8 B. By its arrays' sizes, each further
-// thread adds about 6 B (its band's union-find and resolution-order scratch), so 8
-// threads stay below the 160 kept here. The event method's, from the
-// slope between N = 250 000 and 10⁶ (before the neighbour lists; its state did not
-// change): 352 B (serial). The intercept is about 21 MB. Re-measure when the state or
-// its scratch memory changes size.
+// 82 B per disk serial and 94 B with rayon on 2 threads for equal disks, 99 B and 112 B
+// for radii from 0.5 to 1.5 with equal masses; masses by area add an array, 8 B. By its
+// arrays' sizes, each further thread adds about 6 B (its band's union-find and
+// resolution-order scratch), so 8 threads stay below the 160 kept here. The event
+// method's, from the slope between N = 250 000 and 10⁶: 352 B (serial), with an
+// intercept of about 21 MB. Re-measure when the state or its scratch memory changes size.
 
 /// Peak resident bytes per disk of the step method, any backend (the largest measured,
 /// with room for 8 threads).
@@ -251,7 +247,7 @@ pub const EVENT_BYTES_PER_DISK: u64 = 368;
 pub const BASE_BYTES: u64 = 32 << 20;
 /// Seconds the set-up (placement, ordering, the first grid) takes per disk of a dilute
 /// gas, from `setup_s` of the command above with `--steps 1`; the cost grows as
-/// 1 / (1 − packing / jamming). Measured (2026-11-24, 23:27 UTC, one run each): 0.416 µs
+/// 1 / (1 − packing / jamming). Measured (one run each): 0.416 µs
 /// per disk at 10⁷ and packing 0.05, 0.43 µs at 0.3, 1.24 µs at 0.45, 3.38 µs at 10⁶ and
 /// 0.5 (the model: 0.44, 0.88, 2.3, 4.6); the dilute gas sets the constant, and the
 /// note errs long, never short.

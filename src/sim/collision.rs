@@ -6,7 +6,7 @@
 
 use super::particles::Particles;
 use super::prefetch::prefetch;
-use super::scene::Domain;
+use super::scene::{Domain, Physics};
 
 /// Post-collision normal velocities of two disks (corrected equations 3–4).
 ///
@@ -52,7 +52,7 @@ pub struct PairSide {
 /// b. So a contact needs no orientation (`sim::grid::Contact`).
 #[inline(always)]
 pub fn exchange_along(
-    restitution: f64,
+    physics: &Physics,
     nx: f64,
     ny: f64,
     a: PairSide,
@@ -60,6 +60,7 @@ pub fn exchange_along(
 ) -> ([[f64; 2]; 2], f64) {
     let ua = a.vx * nx + a.vy * ny;
     let ub = b.vx * nx + b.vy * ny;
+    let restitution = physics.restitution;
     let (ua_after, ub_after) = normal_velocities_after(a.mass, b.mass, restitution, ua, ub);
     // v' = v_t + u'·n with v_t = v − u·n: along an axis the tangential part is exactly zero,
     // so a head-on exchange of equal masses swaps the bits exactly.
@@ -87,7 +88,7 @@ pub fn exchange_along(
 /// Coincident centres have no line of centres and are left alone too.
 #[inline(always)]
 pub fn collide_pair(
-    restitution: f64,
+    physics: &Physics,
     dx: f64,
     dy: f64,
     contact: f64,
@@ -115,7 +116,7 @@ pub fn collide_pair(
         return (outcome, None);
     }
     let (nx, ny) = (dx / distance, dy / distance);
-    let (velocities, impulse) = exchange_along(restitution, nx, ny, a, b);
+    let (velocities, impulse) = exchange_along(physics, nx, ny, a, b);
     let outcome = ContactOutcome {
         overlap_fraction,
         collided: true,
@@ -194,7 +195,7 @@ impl DiskState for Particles {
 pub fn resolve_contact<S: DiskState>(
     disks: &mut S,
     domain: &Domain,
-    restitution: f64,
+    physics: &Physics,
     a: usize,
     b: usize,
 ) -> ContactOutcome {
@@ -209,7 +210,7 @@ pub fn resolve_contact<S: DiskState>(
         }
     };
     let contact = disks.radius(a) + disks.radius(b);
-    let (outcome, velocities) = collide_pair(restitution, dx, dy, contact, side(a), side(b));
+    let (outcome, velocities) = collide_pair(physics, dx, dy, contact, side(a), side(b));
     if let Some([after_a, after_b]) = velocities {
         disks.set_velocity(a, after_a);
         disks.set_velocity(b, after_b);
@@ -245,7 +246,13 @@ mod tests {
     /// Resolves a two-disk scene and returns the disks after.
     fn collide(a: Disk, b: Disk, e: f64) -> (Disk, Disk, ContactOutcome) {
         let mut particles = Particles::from_disks(&[a, b]);
-        let outcome = resolve_contact(&mut particles, &OPEN_BOX, e, 0, 1);
+        let outcome = resolve_contact(
+            &mut particles,
+            &OPEN_BOX,
+            &Physics::with_restitution(e),
+            0,
+            1,
+        );
         (particles.disk(0), particles.disk(1), outcome)
     }
 
@@ -298,8 +305,9 @@ mod tests {
             );
             let mut forward = Particles::from_disks(&[a, b]);
             let mut backward = forward.clone();
-            let there = resolve_contact(&mut forward, &domain, e, 0, 1);
-            let back = resolve_contact(&mut backward, &domain, e, 1, 0);
+            let physics = Physics::with_restitution(e);
+            let there = resolve_contact(&mut forward, &domain, &physics, 0, 1);
+            let back = resolve_contact(&mut backward, &domain, &physics, 1, 0);
             assert_eq!(forward.disk(0), backward.disk(0), "round {round}");
             assert_eq!(forward.disk(1), backward.disk(1), "round {round}");
             assert_eq!(

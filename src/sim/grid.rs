@@ -657,44 +657,20 @@ impl StripGrid {
         let reach = rounded_up(self.layout.reach + slack);
         let width = self.layout.width as f32;
         let near_limit = 2.0 * self.layout.max_radius + skin + slack;
-        // In f32, as the entries: the slack covers the few roundings of this test too.
-        let near_sq = rounded_up(near_limit * near_limit);
-        let height = domain.height as f32;
-        let close = |dx: f32, dy: f32| dx * dx + dy * dy < near_sq;
-        let near = |a: &Entry, b: &Entry| {
-            let (dx, dy) = (b.x - a.x, b.y - a.y);
-            match PERIODIC {
-                true => close(minimum_image(dx, width), minimum_image(dy, height)),
-                false => close(dx, dy),
-            }
-        };
-        // Where the minimum image cannot change the differences (below).
-        let near_plain = |a: &Entry, b: &Entry| close(b.x - a.x, b.y - a.y);
-        // With a skin of 0, `r_a + r_b + skin` is the contact distance itself: adding 0.0
-        // to a positive number is exact. With equal radii it is one number.
-        let (x, y, radius) = (&particles.x[..], &particles.y[..], &particles.radius);
         let equal_radius = self.layout.equal_radius.unwrap_or(0.0);
-        let equal_limit = equal_radius + equal_radius + skin;
-        let exact = |a: &Entry, b: &Entry| {
-            let (i, j) = (a.idx as usize, b.idx as usize);
-            let (dx, dy) = domain.separation_in::<PERIODIC>(x[i], y[i], x[j], y[j]);
-            let limit = if EQUAL_RADII {
-                equal_limit
-            } else {
-                radius[i] + radius[j] + skin
-            };
-            dx * dx + dy * dy < limit * limit
+        let test = PairTest::<PERIODIC, EQUAL_RADII> {
+            // In f32, as the entries: the slack covers the few roundings of this test too.
+            near_sq: rounded_up(near_limit * near_limit),
+            width,
+            height: domain.height as f32,
+            particles,
+            domain,
+            equal_limit: equal_radius + equal_radius + skin,
+            skin,
+            superset: !S::EXACT && EQUAL_RADII,
         };
-        let superset = !S::EXACT && EQUAL_RADII;
-        let decide = |nearby: bool, a: &Entry, b: &Entry| {
-            if superset {
-                nearby
-            } else {
-                nearby && exact(a, b)
-            }
-        };
-        let imaged = |a: &Entry, b: &Entry| decide(near(a, b), a, b);
-        let plain = |a: &Entry, b: &Entry| decide(near_plain(a, b), a, b);
+        let imaged = |a: &Entry, b: &Entry| test.decide(test.near(a, b), a, b);
+        let plain = |a: &Entry, b: &Entry| test.decide(test.near_plain(a, b), a, b);
         // Inside a disk's own window, and its north window unless the strip is the box's
         // last (whose north is the first, a box height away), the minimum image leaves
         // every difference as it is when the box is at least 5 strips tall (|dy| is at
@@ -734,38 +710,133 @@ impl StripGrid {
                     offer_window::<NORTH_WINDOW>(north, a, left, &imaged, sink);
                 }
                 if PERIODIC {
-                    // The same windows seen through the periodic image in x.
-                    if a.x + reach > width {
-                        for b in own_entries[..pos]
-                            .iter()
-                            .take_while(|b| b.x + width - a.x < reach)
-                        {
-                            sink.make_room(1);
-                            // SAFETY: room was made just above.
-                            unsafe { sink.offer(imaged(a, b), a, b) };
-                        }
-                        for b in north_entries
-                            .iter()
-                            .take_while(|b| b.x + width < a.x + reach)
-                        {
-                            sink.make_room(1);
-                            // SAFETY: room was made just above.
-                            unsafe { sink.offer(imaged(a, b), a, b) };
-                        }
-                    }
-                    if a.x - reach < 0.0 {
-                        for b in north_entries
-                            .iter()
-                            .rev()
-                            .take_while(|b| b.x - width > a.x - reach)
-                        {
-                            sink.make_room(1);
-                            // SAFETY: room was made just above.
-                            unsafe { sink.offer(imaged(a, b), a, b) };
-                        }
-                    }
+                    offer_periodic_images(
+                        own_entries,
+                        pos,
+                        north_entries,
+                        reach,
+                        width,
+                        &imaged,
+                        sink,
+                    );
                 }
             }
+        }
+    }
+}
+
+/// Offers `sink` the pairs of `own_entries[pos]` with the disks its own and north
+/// windows reach through the box's periodic image in x: the disks at the strip's other
+/// end, when the window crosses the box's right or left side.
+#[inline(always)]
+fn offer_periodic_images(
+    own_entries: &[Entry],
+    pos: usize,
+    north_entries: &[Entry],
+    reach: f32,
+    width: f32,
+    imaged: &impl Fn(&Entry, &Entry) -> bool,
+    sink: &mut impl Sink,
+) {
+    let a = &own_entries[pos];
+    if a.x + reach > width {
+        for b in own_entries[..pos]
+            .iter()
+            .take_while(|b| b.x + width - a.x < reach)
+        {
+            sink.make_room(1);
+            // SAFETY: room was made just above.
+            unsafe { sink.offer(imaged(a, b), a, b) };
+        }
+        for b in north_entries
+            .iter()
+            .take_while(|b| b.x + width < a.x + reach)
+        {
+            sink.make_room(1);
+            // SAFETY: room was made just above.
+            unsafe { sink.offer(imaged(a, b), a, b) };
+        }
+    }
+    if a.x - reach < 0.0 {
+        for b in north_entries
+            .iter()
+            .rev()
+            .take_while(|b| b.x - width > a.x - reach)
+        {
+            sink.make_room(1);
+            // SAFETY: room was made just above.
+            unsafe { sink.offer(imaged(a, b), a, b) };
+        }
+    }
+}
+
+/// The tests a scanned pair goes through: first on the f32 entries, widened by their
+/// rounding to the largest contact distance plus the skin; then, unless the sink takes
+/// a superset, on the disks' f64 positions and radii with the shared arithmetic.
+struct PairTest<'a, const PERIODIC: bool, const EQUAL_RADII: bool> {
+    /// The square of the widened limit, in f32 as the entries.
+    near_sq: f32,
+    width: f32,
+    height: f32,
+    particles: &'a Particles,
+    domain: &'a Domain,
+    /// With equal radii the exact limit is one number: `r + r + skin`.
+    equal_limit: f64,
+    skin: f64,
+    /// The f32 test alone decides (a neighbour list of equal disks).
+    superset: bool,
+}
+
+impl<const PERIODIC: bool, const EQUAL_RADII: bool> PairTest<'_, PERIODIC, EQUAL_RADII> {
+    #[inline(always)]
+    fn close(&self, dx: f32, dy: f32) -> bool {
+        dx * dx + dy * dy < self.near_sq
+    }
+
+    /// The f32 test, through the minimum image in a periodic box.
+    #[inline(always)]
+    fn near(&self, a: &Entry, b: &Entry) -> bool {
+        let (dx, dy) = (b.x - a.x, b.y - a.y);
+        match PERIODIC {
+            true => self.close(
+                minimum_image(dx, self.width),
+                minimum_image(dy, self.height),
+            ),
+            false => self.close(dx, dy),
+        }
+    }
+
+    /// The f32 test where the minimum image cannot change the differences.
+    #[inline(always)]
+    fn near_plain(&self, a: &Entry, b: &Entry) -> bool {
+        self.close(b.x - a.x, b.y - a.y)
+    }
+
+    /// The f64 test. With a skin of 0, `r_a + r_b + skin` is the contact distance itself:
+    /// adding 0.0 to a positive number is exact.
+    #[inline(always)]
+    fn exact(&self, a: &Entry, b: &Entry) -> bool {
+        let (i, j) = (a.idx as usize, b.idx as usize);
+        let (x, y) = (&self.particles.x, &self.particles.y);
+        let (dx, dy) = self
+            .domain
+            .separation_in::<PERIODIC>(x[i], y[i], x[j], y[j]);
+        let limit = if EQUAL_RADII {
+            self.equal_limit
+        } else {
+            let radius = &self.particles.radius;
+            radius[i] + radius[j] + self.skin
+        };
+        dx * dx + dy * dy < limit * limit
+    }
+
+    /// Whether the pair passes, given the f32 test's answer.
+    #[inline(always)]
+    fn decide(&self, nearby: bool, a: &Entry, b: &Entry) -> bool {
+        if self.superset {
+            nearby
+        } else {
+            nearby && self.exact(a, b)
         }
     }
 }

@@ -6,9 +6,8 @@
 /// The line is asked into the second-level cache, not the first: a contact's
 /// resolution reads eight lines (two disks' positions and velocities), and with eight
 /// contacts fetched ahead the first level's few outstanding misses were likely the
-/// limit (inferred from timings). At 10⁶ disks and packing 0.3 the resolution took 1.4
-/// instead of 2.1–2.3 ns per disk-step, and placement was faster too
-/// (`docs/performance.md`).
+/// limit (inferred from timings). At 10⁶ disks and packing 0.3 the second-level hint
+/// ran 1.055× as fast as the first-level one (`docs/performance.md`, Resolution order).
 #[inline(always)]
 pub fn prefetch<T>(item: *const T) {
     #[cfg(target_arch = "x86_64")]

@@ -63,8 +63,8 @@ const SWEEP_TOLERANCE: f64 = 1e-3;
 
 /// Contacts ahead of the one being resolved whose disks are fetched into the caches.
 /// Past the last-level cache a fetch takes longer than resolving eight contacts: 16
-/// instead of 8 took resolution from 1.16–1.18 to 0.76–0.89 ns per disk-step at 10⁶
-/// disks and packing 0.3 (0.57 and 0.60–0.62 at 10⁵; `docs/performance.md`).
+/// ahead instead of 8 ran 1.023× as fast at 10⁶ disks and packing 0.3, and 0.990–0.998×
+/// in smaller or more dilute scenes (`docs/performance.md`, Resolution order).
 const PREFETCH_AHEAD: usize = 16;
 
 /// Resolves `contacts` (whole chains, each in canonical order, [`Contact::key`]: see
@@ -92,10 +92,13 @@ pub fn resolve_contacts<S: DiskState>(
         let (a, b) = (contact.a as usize, contact.b as usize);
         // Without a field every approaching pair is an impact: the approach speed is
         // not needed, and the seed's arithmetic is kept bit for bit.
-        let restitution = bounce.map_or(physics.restitution, |bounce| {
-            bounce.pair(approach_speed(disks, domain, a, b))
-        });
-        let outcome = resolve_contact(disks, domain, restitution, a, b);
+        let outcome = match &bounce {
+            None => resolve_contact(disks, domain, physics, a, b),
+            Some(bounce) => {
+                let law = bounce.pair(physics, approach_speed(disks, domain, a, b));
+                resolve_contact(disks, domain, &law, a, b)
+            }
+        };
         counters.record(outcome);
         if outcome.collided {
             collided(contact);
@@ -103,7 +106,7 @@ pub fn resolve_contacts<S: DiskState>(
     }
     if let Some(bounce) = bounce {
         for _ in 0..MAX_SWEEPS {
-            if !sweep(disks, domain, contacts, &bounce, counters) {
+            if !sweep(disks, domain, physics, contacts, &bounce, counters) {
                 break;
             }
         }
@@ -116,7 +119,6 @@ pub fn resolve_contacts<S: DiskState>(
 /// scene's restitution; slower it is resting contact and gets none.
 #[derive(Clone, Copy, Debug)]
 struct Bounce {
-    pairs: f64,
     walls: f64,
     resting_speed: f64,
     /// Approach speeds below this get no sweep impulse ([`SWEEP_TOLERANCE`]).
@@ -129,20 +131,23 @@ impl Bounce {
         let [gx, gy] = physics.gravity?;
         let speed_per_step = gx.hypot(gy) * dt;
         Some(Bounce {
-            pairs: physics.restitution,
             walls: physics.wall_restitution,
             resting_speed: RESTING_SPEED_STEPS * speed_per_step,
             tolerance: SWEEP_TOLERANCE * speed_per_step,
         })
     }
 
-    /// The restitution of a pair approaching at `speed`.
+    /// The contact law of a pair approaching at `speed`: the scene's, or the scene's
+    /// without restitution for a resting contact.
     #[inline]
-    fn pair(&self, speed: f64) -> f64 {
+    fn pair(&self, physics: &Physics, speed: f64) -> Physics {
         if speed > self.resting_speed {
-            self.pairs
+            *physics
         } else {
-            0.0
+            Physics {
+                restitution: 0.0,
+                ..*physics
+            }
         }
     }
 
@@ -164,6 +169,7 @@ impl Bounce {
 fn sweep<S: DiskState>(
     disks: &mut S,
     domain: &Domain,
+    physics: &Physics,
     contacts: &[Contact],
     bounce: &Bounce,
     counters: &mut StepCounters,
@@ -174,7 +180,7 @@ fn sweep<S: DiskState>(
         let speed = approach_speed(disks, domain, a, b);
         if speed > bounce.tolerance {
             let ContactOutcome { virial, .. } =
-                resolve_contact(disks, domain, bounce.pair(speed), a, b);
+                resolve_contact(disks, domain, &bounce.pair(physics, speed), a, b);
             counters.virial += virial;
             applied = true;
         }
@@ -306,9 +312,8 @@ mod tests {
             boundary: Boundary::Walls,
         };
         let physics = Physics {
-            restitution: 0.4,
-            wall_restitution: 0.4,
             gravity: Some([0.0, -1.0]),
+            ..Physics::with_restitution(0.4)
         };
         // Three staggered rows, the lowest 0.03 into the floor, every disk overlapping its
         // neighbours in its row (by 0.05) and in the rows next to it (by 0.09), falling.

@@ -128,7 +128,10 @@ pub fn wrap_periodic(coordinate: f64, length: f64) -> f64 {
     if wrapped < length { wrapped } else { 0.0 }
 }
 
-/// Contact laws and external field of a scene.
+/// Contact laws and external field of a scene: the one struct a physical scene field is
+/// declared in. The scene file fills it (`run::scene_file`), and it travels whole down
+/// to the kernels (`sim::collision`, the wall rules), so a new field reaches them
+/// without changing a signature.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Physics {
     /// Pair restitution e in [0, 1].
@@ -139,19 +142,30 @@ pub struct Physics {
     pub gravity: Option<[f64; 2]>,
 }
 
+/// What a scene file that says nothing of physics gets: elastic pairs and walls, no field.
+impl Default for Physics {
+    fn default() -> Physics {
+        Physics {
+            restitution: 1.0,
+            wall_restitution: 1.0,
+            gravity: None,
+        }
+    }
+}
+
 impl Physics {
     /// Restitution `e` for pairs and walls alike, no field.
     pub fn with_restitution(e: f64) -> Physics {
         Physics {
             restitution: e,
             wall_restitution: e,
-            gravity: None,
+            ..Physics::default()
         }
     }
 
     /// Elastic pairs and walls, no field.
     pub fn elastic() -> Physics {
-        Physics::with_restitution(1.0)
+        Physics::default()
     }
 
     /// Pairs and walls give back all their normal speed: the kinetic energy is conserved.

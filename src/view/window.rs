@@ -198,66 +198,147 @@ impl Screen {
 pub fn run(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<ViewStats> {
     debug_assert!(options.threads.is_none() || prepared.method == Method::Step);
     let mut screen = Screen::open("collide view", options.width, options.height + STATUS_ROWS)?;
-    let n = prepared.scene.particles.len();
-    let (dt, total_steps) = (prepared.params.dt, prepared.steps);
-    let domain = prepared.scene.domain;
-    let controls = Arc::new(Controls {
-        paused: AtomicBool::new(false),
-        steps_per_frame: AtomicU64::new(options.steps_per_frame),
-        single_steps: AtomicU64::new(0),
-        quit: AtomicBool::new(false),
-    });
-    let (empty_tx, empty_rx) = channel::<Shown>();
-    let (full_tx, full_rx) = channel::<Shown>();
-    for _ in 0..2 {
-        empty_tx.send(Shown::default()).ok();
-    }
-    let stepping = Stepping::new(&prepared, options.threads)?;
-    let simulation = {
-        let controls = Arc::clone(&controls);
-        thread::Builder::new()
-            .name("collide-view-simulation".to_owned())
-            .spawn(move || simulate(prepared, stepping, &controls, &empty_rx, &full_tx))
-            .context("cannot start the simulation thread")?
+    let run = RunFacts {
+        n: prepared.scene.particles.len(),
+        dt: prepared.params.dt,
+        total_steps: prepared.steps,
+        domain: prepared.scene.domain,
+        // Nobody can close a window on a virtual display: without `--frames` it closes
+        // when the scene's steps are done and shown.
+        closes_at_the_end: options.frames.is_none()
+            && is_virtual(&std::env::var("DISPLAY").unwrap_or_default()) == Some(true),
     };
+    if run.closes_at_the_end {
+        crate::outln!(
+            "the display is virtual (Xvfb) and --frames was not given: the view closes after \
+             the scene's {} steps",
+            run.total_steps
+        );
+    }
+    let simulation = Simulation::start(prepared, options)?;
+    let started = Instant::now();
+    let (outcome, shown) = show_frames(&mut screen, &simulation, options, &run);
+    let stepped = simulation.stop()?;
+    let session_s = started.elapsed().as_secs_f64();
+    outcome?;
+    if let Some(path) = &options.screenshot {
+        write_png(path, &shown.frame)?;
+    }
+    let times = FrameTimes {
+        shared_memory: screen.shares_memory(),
+        ..shown.times
+    };
+    let stats = view_stats(times, &stepped, session_s, shown.drawn_as, run.dt, options);
+    if let Some(path) = &options.stats {
+        let text = serde_json::to_string_pretty(&stats)?;
+        write_atomically(path, |out| writeln!(out, "{text}"))?;
+    }
+    Ok(stats)
+}
 
+/// What the status line says of the run, fixed for its length.
+struct RunFacts {
+    n: usize,
+    dt: f64,
+    total_steps: u64,
+    domain: Domain,
+    /// Close the window once the last step is shown.
+    closes_at_the_end: bool,
+}
+
+/// The simulation thread, the keys' controls it reads, and the two queues of snapshots
+/// between it and the window: empty ones to fill, full ones to draw.
+struct Simulation {
+    controls: Arc<Controls>,
+    empty_tx: Sender<Shown>,
+    full_rx: Receiver<Shown>,
+    thread: thread::JoinHandle<Stepped>,
+}
+
+impl Simulation {
+    /// Starts stepping `prepared` on its own thread, with two empty snapshots to fill.
+    fn start(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<Simulation> {
+        let controls = Arc::new(Controls {
+            paused: AtomicBool::new(false),
+            steps_per_frame: AtomicU64::new(options.steps_per_frame),
+            single_steps: AtomicU64::new(0),
+            quit: AtomicBool::new(false),
+        });
+        let (empty_tx, empty_rx) = channel::<Shown>();
+        let (full_tx, full_rx) = channel::<Shown>();
+        for _ in 0..2 {
+            empty_tx.send(Shown::default()).ok();
+        }
+        let stepping = Stepping::new(&prepared, options.threads)?;
+        let thread = {
+            let controls = Arc::clone(&controls);
+            thread::Builder::new()
+                .name("collide-view-simulation".to_owned())
+                .spawn(move || simulate(prepared, stepping, &controls, &empty_rx, &full_tx))
+                .context("cannot start the simulation thread")?
+        };
+        Ok(Simulation {
+            controls,
+            empty_tx,
+            full_rx,
+            thread,
+        })
+    }
+
+    /// Tells the thread to quit, hangs up its queues and takes what it stepped.
+    fn stop(self) -> anyhow::Result<Stepped> {
+        self.controls.quit.store(true, Ordering::Relaxed);
+        drop(self.empty_tx);
+        drop(self.full_rx);
+        self.thread
+            .join()
+            .map_err(|_| anyhow::anyhow!("the simulation thread panicked"))
+    }
+}
+
+/// What the frame loop leaves: the last frame, how it was drawn, and where the time went.
+struct ShownFrames {
+    frame: Frame,
+    drawn_as: Drawn,
+    times: FrameTimes,
+}
+
+/// Draws the newest snapshot in every frame until the window is closed, `--frames`
+/// frames are drawn, or the simulation thread stops unexpectedly (the error).
+fn show_frames(
+    screen: &mut Screen,
+    simulation: &Simulation,
+    options: &ViewOptions,
+    run: &RunFacts,
+) -> (anyhow::Result<()>, ShownFrames) {
     let font = StatusFont::default();
+    let (controls, domain) = (&simulation.controls, &run.domain);
     let mut view = View::whole_box(options.width, options.height, domain.width, domain.height);
     let mut frame = Frame::with_status_rows(STATUS_ROWS);
     let mut shown: Option<Shown> = None;
-    let mut frame_s = Vec::new();
-    let (mut draw_s, mut present_s, mut wait_s) = (0.0, 0.0, 0.0);
+    let mut times = FrameTimes::default();
     let mut drawn_as = Drawn::Circles;
     let mut screenshots = 0_u32;
     let frame_interval = options
         .max_fps
         .map(|fps| Duration::from_secs_f64(1.0 / f64::from(fps)));
-    let started = Instant::now();
-    let mut rates = Rates {
-        since: started,
-        frames: 0,
-        steps: 0,
-        frames_per_s: 0.0,
-        steps_per_s: 0.0,
-    };
+    let mut rates = Rates::since(Instant::now());
     let mut status = String::new();
     let mut closing = false;
     let outcome = loop {
-        if closing
-            || !screen.window.is_open()
-            || options.frames.is_some_and(|k| frame_s.len() as u64 >= k)
-        {
+        let drawn = times.frame_s.len() as u64;
+        if closing || !screen.window.is_open() || options.frames.is_some_and(|k| drawn >= k) {
             break Ok(());
         }
         let frame_start = Instant::now();
         // A new state if one is ready (at most one per frame, so that `steps per
         // frame` holds); the one it replaces goes back to be refilled.
         if shown.is_none() {
-            shown = full_rx.recv().ok();
-        } else if let Ok(fresh) = full_rx.try_recv()
+            shown = simulation.full_rx.recv().ok();
+        } else if let Ok(fresh) = simulation.full_rx.try_recv()
             && let Some(old) = shown.replace(fresh)
         {
-            empty_tx.send(old).ok();
+            simulation.empty_tx.send(old).ok();
         }
         let Some(current) = shown.as_ref() else {
             break Err(anyhow::anyhow!(
@@ -267,18 +348,18 @@ pub fn run(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<ViewS
         let draw_start = Instant::now();
         drawn_as = draw(&current.snapshot, &view, &mut frame);
         font.write(&mut frame, &status);
-        draw_s += draw_start.elapsed().as_secs_f64();
+        times.draw_s += draw_start.elapsed().as_secs_f64();
         let present_start = Instant::now();
         if let Err(err) = screen.present(&frame) {
             break Err(err);
         }
-        present_s += present_start.elapsed().as_secs_f64();
+        times.present_s += present_start.elapsed().as_secs_f64();
         closing = apply_keys(
-            &screen,
-            &controls,
+            screen,
+            controls,
             &mut view,
             options,
-            &domain,
+            domain,
             &frame,
             &mut screenshots,
         );
@@ -287,40 +368,24 @@ pub fn run(prepared: PreparedRun, options: &ViewOptions) -> anyhow::Result<ViewS
             if let Some(rest) = interval.checked_sub(frame_start.elapsed()) {
                 thread::sleep(rest);
             }
-            wait_s += wait_start.elapsed().as_secs_f64();
+            times.wait_s += wait_start.elapsed().as_secs_f64();
         }
-        frame_s.push(frame_start.elapsed().as_secs_f64());
-        rates.update(frame_s.len() as u64, current.steps, status.is_empty());
-        status = status_line(&rates, current, &controls, n, dt, total_steps);
+        times.frame_s.push(frame_start.elapsed().as_secs_f64());
+        rates.update(times.frame_s.len() as u64, current.steps, status.is_empty());
+        status = status_line(&rates, current, controls, run.n, run.dt, run.total_steps);
+        closing |= run.closes_at_the_end && current.steps == run.total_steps;
     };
-    controls.quit.store(true, Ordering::Relaxed);
-    drop(empty_tx);
-    drop(full_rx);
-    let stepped = simulation
-        .join()
-        .map_err(|_| anyhow::anyhow!("the simulation thread panicked"))?;
-    let session_s = started.elapsed().as_secs_f64();
-    outcome?;
-    if let Some(path) = &options.screenshot {
-        write_png(path, &frame)?;
-    }
-    let times = FrameTimes {
-        frame_s,
-        draw_s,
-        present_s,
-        wait_s,
-        shared_memory: screen.shares_memory(),
+    let shown = ShownFrames {
+        frame,
+        drawn_as,
+        times,
     };
-    let stats = view_stats(times, &stepped, session_s, drawn_as, dt, options);
-    if let Some(path) = &options.stats {
-        let text = serde_json::to_string_pretty(&stats)?;
-        write_atomically(path, |out| writeln!(out, "{text}"))?;
-    }
-    Ok(stats)
+    (outcome, shown)
 }
 
 /// Where the frames' time went: each frame's, and the sums of its parts; and whether
 /// presenting went through shared memory.
+#[derive(Default)]
 struct FrameTimes {
     frame_s: Vec<f64>,
     draw_s: f64,
@@ -444,6 +509,17 @@ fn apply_keys(
 }
 
 impl Rates {
+    /// No frames and no steps yet, counted from `since`.
+    fn since(since: Instant) -> Rates {
+        Rates {
+            since,
+            frames: 0,
+            steps: 0,
+            frames_per_s: 0.0,
+            steps_per_s: 0.0,
+        }
+    }
+
     /// Rates from the frames and steps since the last update, at most every half
     /// second (or at once, when `now` asks for a first status line).
     fn update(&mut self, frames: u64, steps: u64, now: bool) {
