@@ -72,6 +72,8 @@ fn mpi_ranks_count_what_they_send_as_ranks_run_as_threads_do() {
             "bytes_per_step_max",
             "bytes_per_step_mean",
             "collectives_per_step",
+            "load_imbalance",
+            "recuts",
         ] {
             assert_eq!(mpi[field], threads[field], "{field} at {ranks} ranks");
         }

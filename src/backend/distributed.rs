@@ -23,8 +23,8 @@ use std::time::Instant;
 use crate::backend::comm::{Communicator, Counting, RankTraffic, Traffic};
 use crate::backend::shared::{Neighbourhood, Seen, SharedChains, pack_shared_disk};
 use crate::backend::{
-    Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
-    summarize, timed,
+    Accuracy, BackendError, Balance, CpuScope, Measured, RunOutcome, StageSeconds, Workers,
+    step_loop, summarize, timed,
 };
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
@@ -90,7 +90,11 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     for packed in &states {
         last.unpack_append(packed);
     }
-    let measured = merge_figures(&all_figures, rank.shared_counters, setup_s, initial);
+    let mut measured = merge_figures(&all_figures, rank.shared_counters, setup_s, initial);
+    measured.balance = (rank.steps > 0).then(|| Balance {
+        imbalance: rank.busiest_share_sum / rank.steps as f64,
+        recuts: rank.recuts,
+    });
     let workers = Workers {
         backend: BackendKind::Mpi,
         threads: 1,
@@ -175,6 +179,7 @@ fn merge_figures(
         // Drawing needs every disk in one process: refused before an MPI run starts.
         draw_s: None,
         traffic: Some(RankTraffic::over(&sent_by_rank)),
+        balance: None,
     }
 }
 
@@ -196,7 +201,15 @@ fn slabs(
     for &y in &particles.y {
         per_strip[layout.strip_of(y)] += 1;
     }
-    let total = particles.len();
+    Ok(cut_slabs(&per_strip, n_ranks))
+}
+
+/// Cuts strips holding `per_strip` disks each into `n_ranks` slabs of whole strips (at
+/// least one each, so `n_ranks` ≤ the strips), each slab ending where the disks before
+/// it first reach their share of the total.
+fn cut_slabs(per_strip: &[usize], n_ranks: usize) -> Vec<Range<usize>> {
+    let n_strips = per_strip.len();
+    let total: usize = per_strip.iter().sum();
     let mut slabs = Vec::with_capacity(n_ranks);
     let (mut start, mut count) = (0, 0);
     for rank in 0..n_ranks - 1 {
@@ -213,7 +226,57 @@ fn slabs(
         start = end;
     }
     slabs.push(start..n_strips);
-    Ok(slabs)
+    slabs
+}
+
+/// The slabs are cut again, at a rebuild, when the rank holding most disks holds more
+/// than this many times the mean: disks that settle (a pile under gravity) or drift
+/// leave the first cut's ranks uneven, and a step lasts as long as its busiest rank's.
+const REBALANCE_ABOVE: f64 = 1.1;
+
+/// ... and more than this above the busiest share the last cut made: whole strips may
+/// not allow an even cut, and cutting again cannot do better than the disks allow.
+const REBALANCE_GAIN: f64 = 0.05;
+
+/// One rank's part of a cut of the strips into slabs: its slab, every strip's owner,
+/// the ranks near it, the rank its ghosts come from, and its slab's grid, filled with
+/// the disks given.
+struct SlabPart {
+    slab: Range<usize>,
+    owner: Vec<usize>,
+    hood: Neighbourhood,
+    ghosts_from: Option<usize>,
+    grid: StripGrid,
+}
+
+impl SlabPart {
+    fn new(
+        slabs: &[Range<usize>],
+        domain: &crate::sim::Domain,
+        layout: StripLayout,
+        me: usize,
+        particles: &Particles,
+    ) -> SlabPart {
+        let slab = slabs[me].clone();
+        let mut owner = vec![0; layout.n_strips];
+        for (rank, strips) in slabs.iter().enumerate() {
+            owner[strips.clone()].fill(rank);
+        }
+        let mut grid = StripGrid::window(domain, layout, slab.clone());
+        grid.fill(particles, 0..particles.len());
+        let periodic = domain.boundary == Boundary::Periodic;
+        let ghosts_from =
+            (grid.ghost_strip()).and_then(|strip| Some(owner[strip]).filter(|&rank| rank != me));
+        let peers = peers_of(&owner, &slab, periodic, me);
+        let hood = Neighbourhood::new(slabs, &owner, periodic, me, peers);
+        SlabPart {
+            slab,
+            owner,
+            hood,
+            ghosts_from,
+            grid,
+        }
+    }
 }
 
 /// One rank's disks, grid and scratch memory.
@@ -265,6 +328,16 @@ struct RankState {
     /// What the resolution of shared chains did: the same on every rank, counted once.
     shared_counters: StepCounters,
     stages: StageSeconds,
+    /// Disks in the whole scene.
+    n_disks: usize,
+    /// The busiest rank's disks over the mean, summed over the steps (the same on every
+    /// rank), and the steps.
+    busiest_share_sum: f64,
+    steps: u64,
+    /// Times [`RankState::rebalance`] ran.
+    recuts: u64,
+    /// The busiest rank's disks over the mean just after the last cut (1 before any).
+    cut_share: f64,
 }
 
 /// How far from its slab a rank looks for the ranks it talks to in a step: a disk that
@@ -274,19 +347,23 @@ const PEER_STRIPS: usize = 2;
 
 /// What every rank learns, in one small all-reduce, of every rank's escapees: the
 /// largest displacement, whether some rank has too many escapees for queries, and
-/// whether some rank has escapees to report to its peers.
+/// whether some rank has escapees to report to its peers; and the most disks a rank
+/// owns, for the balance of the slabs.
 struct EscapeeSummary {
     moved_sq: f64,
     crowded: bool,
     reported: bool,
+    most_disks: usize,
 }
 
 impl EscapeeSummary {
-    fn values(&self) -> [f64; 3] {
+    fn values(&self) -> [f64; 4] {
         [
             self.moved_sq,
             f64::from(self.crowded),
             f64::from(self.reported),
+            // Counts below 2⁵³: exact as f64.
+            self.most_disks as f64,
         ]
     }
 
@@ -296,6 +373,7 @@ impl EscapeeSummary {
             moved_sq: largest[0],
             crowded: largest[1] > 0.0,
             reported: largest[2] > 0.0,
+            most_disks: largest[3] as usize,
         }
     }
 }
@@ -328,32 +406,28 @@ impl RankState {
         skin: Skin,
     ) -> RankState {
         let me = comm.rank();
-        let slab = slabs[me].clone();
-        let mut owner = vec![0; layout.n_strips];
-        for (rank, strips) in slabs.iter().enumerate() {
-            owner[strips.clone()].fill(rank);
-        }
         let all = &scene.particles;
         let mut packed = Vec::new();
         for idx in 0..all.len() {
-            if slab.contains(&layout.strip_of(all.y[idx])) {
+            if slabs[me].contains(&layout.strip_of(all.y[idx])) {
                 all.pack(idx, &mut packed);
             }
         }
         let n_own = packed.len() / PACKED_LEN;
         let mut particles = Particles::with_capacity(n_own + n_own / SPARE_SHARE);
         particles.unpack_append(&packed);
-        let mut grid = StripGrid::window(&scene.domain, layout, slab.clone());
-        grid.fill(&particles, 0..particles.len());
-        let periodic = scene.domain.boundary == Boundary::Periodic;
-        let other = |strip: usize| Some(owner[strip]).filter(|&rank| rank != me);
-        let peers = peers_of(&owner, &slab, periodic, me);
-        let hood = Neighbourhood::new(slabs, &owner, periodic, me, peers);
+        let SlabPart {
+            slab,
+            owner,
+            hood,
+            ghosts_from,
+            grid,
+        } = SlabPart::new(slabs, &scene.domain, layout, me, &particles);
         RankState {
             domain: scene.domain,
             physics: scene.physics,
             layout,
-            ghosts_from: grid.ghost_strip().and_then(other),
+            ghosts_from,
             hood,
             slab,
             owner,
@@ -376,6 +450,11 @@ impl RankState {
             counters: StepCounters::default(),
             shared_counters: StepCounters::default(),
             stages: StageSeconds::default(),
+            n_disks: all.len(),
+            busiest_share_sum: 0.0,
+            steps: 0,
+            recuts: 0,
+            cut_share: 1.0,
         }
     }
 
@@ -403,8 +482,15 @@ impl RankState {
         });
         let stale = self.skin.is_exceeded(all.moved_sq);
         let rebuild = stale && (all.crowded || !self.skin.may_reach(all.moved_sq));
+        let mean_disks = self.n_disks as f64 / comm.size() as f64;
+        let busiest_share = all.most_disks as f64 / mean_disks;
+        self.busiest_share_sum += busiest_share;
+        self.steps += 1;
         if rebuild {
             self.redistribute(comm, &mut stages, all.moved_sq);
+            if busiest_share > REBALANCE_ABOVE.max(self.cut_share + REBALANCE_GAIN) {
+                timed(&mut stages.communication, || self.rebalance(comm));
+            }
         }
         let reported = match (stale && !rebuild, all.reported) {
             (true, true) => timed(&mut stages.communication, || {
@@ -586,6 +672,78 @@ impl RankState {
         });
     }
 
+    /// Cuts the slabs again by the disks each strip holds now (on every rank together,
+    /// after the disks migrated at a rebuild): every rank learns every strip's count
+    /// (an all-gather of a few numbers per strip), cuts as at set-up, and sends the
+    /// disks of strips that changed owner to their new ranks (an all-to-all). Where the
+    /// disks are held never changes the bits.
+    fn rebalance<C: Communicator>(&mut self, comm: &C) {
+        self.recuts += 1;
+        let me = comm.rank();
+        let counts: Vec<f64> = (self.slab.clone())
+            .map(|strip| self.grid.strip_entries(strip).len() as f64)
+            .collect();
+        // The slabs lie in rank order: the ranks' counts, one after another, are the strips'.
+        let per_strip: Vec<usize> = (comm.all_gather(&counts).iter().flatten())
+            .map(|&count| count as usize)
+            .collect();
+        debug_assert_eq!(per_strip.len(), self.layout.n_strips);
+        let slabs = cut_slabs(&per_strip, comm.size());
+        let most = (slabs.iter())
+            .map(|slab| per_strip[slab.clone()].iter().sum::<usize>())
+            .max()
+            .unwrap_or(0);
+        self.cut_share = most as f64 * comm.size() as f64 / self.n_disks as f64;
+        let owner_of = |particles: &Particles, idx: usize| {
+            let strip = self.layout.strip_of(particles.y[idx]);
+            slabs
+                .iter()
+                .position(|slab| slab.contains(&strip))
+                .unwrap_or(me)
+        };
+        let mut outgoing = vec![Vec::new(); comm.size()];
+        for idx in 0..self.particles.len() {
+            let to = owner_of(&self.particles, idx);
+            self.particles.pack(idx, &mut outgoing[to]);
+        }
+        let staying = std::mem::take(&mut outgoing[me]);
+        let arrived = comm.exchange(&outgoing);
+        drop(outgoing);
+        let n_own = staying.len() / PACKED_LEN
+            + arrived
+                .iter()
+                .map(|packed| packed.len() / PACKED_LEN)
+                .sum::<usize>();
+        let mut particles = Particles::with_capacity(n_own + n_own / SPARE_SHARE);
+        particles.unpack_append(&staying);
+        for packed in &arrived {
+            particles.unpack_append(packed);
+        }
+        let part = SlabPart::new(&slabs, &self.domain, self.layout, me, &particles);
+        (
+            self.slab,
+            self.owner,
+            self.hood,
+            self.ghosts_from,
+            self.grid,
+        ) = (
+            part.slab,
+            part.owner,
+            part.hood,
+            part.ghosts_from,
+            part.grid,
+        );
+        self.particles = particles;
+        self.n_own = self.particles.len();
+        // As at set-up: the strips sorted, the positions recorded for the lists, the
+        // disks the rank below sees noted.
+        let none_left = self.refresh(comm.size());
+        debug_assert!(none_left.iter().all(Vec::is_empty));
+        self.migrate(&[]);
+        self.skin.record(&self.particles, &InTurn);
+        self.mark_exported();
+    }
+
     /// Builds the lists at the disks' present positions, on every rank together, as the
     /// first step would (the serial `Stepper::build_lists`): a run's set-up, untimed.
     fn build_lists<C: Communicator>(&mut self, comm: &C) {
@@ -634,6 +792,7 @@ impl RankState {
             },
             crowded: !self.skin.may_patch(self.escapees.len(), n_own, 0.0),
             reported: !self.reported.is_empty(),
+            most_disks: n_own,
         }
     }
 
@@ -930,8 +1089,11 @@ mod tests {
                 "{ranks} ranks"
             );
             // The pile, a third of the box, is one chain: across more than a rank and its
-            // peers from 8 ranks on, and then the ranks gather it on some steps.
-            let gathered = summary.collectives_per_step.unwrap() > 2.0;
+            // peers from 8 ranks on, and then the ranks gather it on some steps. Per
+            // step 2 collectives; per re-cut of the slabs 2 more.
+            let collectives = summary.collectives_per_step.unwrap() * summary.steps as f64;
+            let recuts = summary.recuts.unwrap() as f64;
+            let gathered = collectives > 2.0 * (summary.steps as f64 + recuts);
             assert_eq!(gathered, ranks >= 8, "{ranks} ranks: {summary}");
         }
     }
@@ -1022,18 +1184,123 @@ mod tests {
                 Some(2.0),
                 "no all-gather: {case}"
             );
-            // The reductions: of 3 values and of 1, each to ⌈log₂ P⌉ ranks.
+            // The reductions: of 4 values and of 1, each to ⌈log₂ P⌉ ranks.
             let partners = (ranks as f64).log2().ceil();
             let to_peers = summary.messages_per_step_max.unwrap() - 2.0 * partners;
             assert!((3.0..=7.0).contains(&to_peers), "{case}");
+            // The first cut holds: no rank far above the mean, no cut again.
+            assert!(summary.load_imbalance.unwrap() <= 1.15, "{case}");
+            assert_eq!(summary.recuts, Some(0), "{case}");
             let [mean, max] = [summary.bytes_per_step_mean, summary.bytes_per_step_max]
-                .map(|bytes| bytes.unwrap() - (3.0 + 1.0) * 8.0 * partners);
+                .map(|bytes| bytes.unwrap() - (4.0 + 1.0) * 8.0 * partners);
             assert!(max <= 1.3 * mean, "{case}");
             mean_bytes.push(mean);
         }
         let (least, most) =
             (mean_bytes.iter()).fold((f64::MAX, 0.0_f64), |(lo, hi), &b| (lo.min(b), hi.max(b)));
         assert!(most <= 1.1 * least, "mean bytes per step: {mean_bytes:?}");
+    }
+
+    /// A gas falling to the bottom of a tall box: the first cut, made for the gas spread
+    /// over the box, would leave the lowest rank with most of the pile (over twice the
+    /// mean, asserted from the serial run's last state). The ranks cut their slabs
+    /// again as the disks fall, keep the busiest rank within 1.15 times the mean over
+    /// the steps, and keep the serial bits.
+    #[test]
+    fn ranks_cut_their_slabs_again_as_a_gas_falls_into_a_pile() {
+        let ranks = 4;
+        let spec = RunSpec {
+            scene: SceneSource::Gas(GasSpec {
+                extent: crate::sim::scene::Extent::Size {
+                    width: 10.0,
+                    height: 600.0,
+                },
+                physics: Physics {
+                    gravity: Some([0.0, -0.5]),
+                    ..Physics::with_restitution(0.5)
+                },
+                seed: 3,
+                ..GasSpec::unit(600, 0.0)
+            }),
+            method: MethodSpec::stepped(0.02, 2500, Broadphase::Grid),
+            slowdown: InjectedSlowdown::NONE,
+        };
+        let prepared = spec.prepare().unwrap();
+        let skin = Skin::for_scene(
+            &prepared.scene.domain,
+            &prepared.scene.particles,
+            prepared.params.dt,
+        );
+        let layout = StripLayout::with_skin(
+            &prepared.scene.domain,
+            &prepared.scene.particles,
+            skin.width(),
+        );
+        let first_cut = slabs(&layout, &prepared.scene.particles, ranks).unwrap();
+        let reference = serial::run(&spec).unwrap();
+        let most_in_first_cut = (first_cut.iter())
+            .map(|slab| {
+                let last = &reference.final_state;
+                (last.y.iter())
+                    .filter(|&&y| slab.contains(&layout.strip_of(y)))
+                    .count()
+            })
+            .max()
+            .unwrap();
+        let mean = 600.0 / ranks as f64;
+        assert!(
+            most_in_first_cut as f64 > 2.0 * mean,
+            "{most_in_first_cut} disks"
+        );
+        let summary = run_on_threads(&spec, ranks).summary;
+        let case = format!("{summary}");
+        assert_eq!(summary.state_hash, reference.summary.state_hash, "{case}");
+        assert!(summary.recuts.unwrap() > 0, "{case}");
+        let imbalance = summary.load_imbalance.unwrap();
+        assert!((1.0..=1.15).contains(&imbalance), "{case}");
+    }
+
+    /// A pile on 16 ranks (disks placed on a lattice in a tall box, settled first by the
+    /// serial run): the slabs, cut by the disks of each strip, hold at most 1.15 times
+    /// the mean each, with the bits of the serial run.
+    #[test]
+    fn a_settled_pile_on_sixteen_ranks_is_shared_out_evenly() {
+        let ranks = 16;
+        let mut spec = RunSpec {
+            scene: SceneSource::Gas(GasSpec {
+                extent: crate::sim::scene::Extent::Size {
+                    width: 10.0,
+                    height: 1000.0,
+                },
+                placement: crate::sim::scene::Placement::Lattice,
+                speed_rms: 0.1,
+                physics: Physics {
+                    gravity: Some([0.0, -0.05]),
+                    ..Physics::with_restitution(0.5)
+                },
+                seed: 4,
+                ..GasSpec::unit(1500, 0.0)
+            }),
+            method: MethodSpec::stepped(0.02, 6000, Broadphase::Grid),
+            slowdown: InjectedSlowdown::NONE,
+        };
+        let settled = serial::run(&spec).unwrap();
+        let settled_top = settled.final_state.y.iter().fold(0.0_f64, |a, &b| a.max(b));
+        let prepared = spec.prepare().unwrap();
+        spec.scene = SceneSource::Explicit(crate::sim::Scene {
+            particles: settled.final_state,
+            ..prepared.scene
+        });
+        spec.method = MethodSpec::stepped(0.02, 20, Broadphase::Grid);
+        let reference = serial::run(&spec).unwrap().summary;
+        // A pile: every disk in the lower part of the box, the top third empty.
+        let top = settled_top;
+        assert!(top < 1000.0 * 2.0 / 3.0, "the highest disk at {top}");
+        let summary = run_on_threads(&spec, ranks).summary;
+        let case = format!("{summary}");
+        assert_eq!(summary.state_hash, reference.state_hash, "{case}");
+        let imbalance = summary.load_imbalance.unwrap();
+        assert!((1.0..=1.15).contains(&imbalance), "{case}");
     }
 
     #[test]
