@@ -118,13 +118,13 @@ struct Controls {
     quit: AtomicBool,
 }
 
-/// The status line's rates, over the time since `since` (about half a second).
+/// The status line's rates, over about half a second before the last update: frames
+/// per second and steps per second, `None` until half a second has been measured.
 struct Rates {
     since: Instant,
     frames: u64,
     steps: u64,
-    frames_per_s: f64,
-    steps_per_s: f64,
+    per_s: Option<(f64, f64)>,
 }
 
 /// What the simulation thread leaves behind.
@@ -323,7 +323,6 @@ fn show_frames(
         .max_fps
         .map(|fps| Duration::from_secs_f64(1.0 / f64::from(fps)));
     let mut rates = Rates::since(Instant::now());
-    let mut status = String::new();
     let mut closing = false;
     let outcome = loop {
         let drawn = times.frame_s.len() as u64;
@@ -345,6 +344,9 @@ fn show_frames(
                 "the simulation thread stopped unexpectedly"
             ));
         };
+        // The status line describes the state drawn in this frame.
+        rates.update(drawn, current.steps);
+        let status = status_line(&rates, current, controls, run.n, run.dt, run.total_steps);
         let draw_start = Instant::now();
         drawn_as = draw(&current.snapshot, &view, &mut frame);
         font.write(&mut frame, &status);
@@ -371,8 +373,6 @@ fn show_frames(
             times.wait_s += wait_start.elapsed().as_secs_f64();
         }
         times.frame_s.push(frame_start.elapsed().as_secs_f64());
-        rates.update(times.frame_s.len() as u64, current.steps, status.is_empty());
-        status = status_line(&rates, current, controls, run.n, run.dt, run.total_steps);
         closing |= run.closes_at_the_end && current.steps == run.total_steps;
     };
     let shown = ShownFrames {
@@ -515,23 +515,32 @@ impl Rates {
             since,
             frames: 0,
             steps: 0,
-            frames_per_s: 0.0,
-            steps_per_s: 0.0,
+            per_s: None,
         }
     }
 
-    /// Rates from the frames and steps since the last update, at most every half
-    /// second (or at once, when `now` asks for a first status line).
-    fn update(&mut self, frames: u64, steps: u64, now: bool) {
+    /// Rates from the frames drawn and the steps shown since the last update, once
+    /// half a second has passed since it.
+    fn update(&mut self, frames: u64, steps: u64) {
         let seconds = self.since.elapsed().as_secs_f64();
-        if seconds >= 0.5 || now {
+        if seconds >= 0.5 {
             *self = Rates {
                 since: Instant::now(),
                 frames,
                 steps,
-                frames_per_s: (frames - self.frames) as f64 / seconds.max(1e-9),
-                steps_per_s: (steps - self.steps) as f64 / seconds.max(1e-9),
+                per_s: Some((
+                    (frames - self.frames) as f64 / seconds,
+                    (steps - self.steps) as f64 / seconds,
+                )),
             };
+        }
+    }
+
+    /// "12 frames/s  340 steps/s", or "measuring" before the first half second.
+    fn describe(&self) -> String {
+        match self.per_s {
+            Some((frames, steps)) => format!("{frames:.0} frames/s  {steps:.0} steps/s"),
+            None => "frames/s and steps/s: measuring".to_owned(),
         }
     }
 }
@@ -547,9 +556,8 @@ fn status_line(
 ) -> String {
     let paused = controls.paused.load(Ordering::Relaxed);
     format!(
-        "{:.0} frames/s  {:.0} steps/s  N {}  t {:.3}  E {:.6e}  step {}/{}  {} steps/frame{}",
-        rates.frames_per_s,
-        rates.steps_per_s,
+        "{}  N {}  t {:.3}  E {:.6e}  step {}/{}  {} steps/frame{}",
+        rates.describe(),
         n,
         current.steps as f64 * dt,
         current.snapshot.kinetic_energy,
@@ -710,6 +718,22 @@ mod tests {
         assert_eq!(quantile(&mut ms, 0.5), 10.0);
         assert_eq!(quantile(&mut ms, 0.95), 19.0);
         assert_eq!(quantile(&mut [], 0.5), 0.0);
+    }
+
+    #[test]
+    fn the_status_line_says_the_rates_are_being_measured_until_half_a_second_has_passed() {
+        let mut rates = Rates::since(Instant::now());
+        rates.update(3, 30);
+        assert_eq!(rates.describe(), "frames/s and steps/s: measuring");
+        let mut rates = Rates::since(Instant::now() - Duration::from_secs(1));
+        rates.update(10, 400);
+        let said = rates.describe();
+        let [frames, steps]: [f64; 2] = [said.split(' ').next(), said.split("  ").nth(1)]
+            .map(|part| part.unwrap().split(' ').next().unwrap().parse().unwrap());
+        assert!(
+            (5.0..=10.0).contains(&frames) && (200.0..=400.0).contains(&steps),
+            "{said}"
+        );
     }
 
     #[test]
