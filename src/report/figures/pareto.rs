@@ -56,7 +56,7 @@ type Panel<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<LogCoord<f6
 fn draw_pareto(groups: &[PackingGroup], canvas: &Canvas<'_>) -> anyhow::Result<()> {
     let root = titled_canvas(
         canvas,
-        "Speed against accuracy: step method (points, large dt on the left) and event reference (dashed)",
+        "Speed against accuracy: step method (points, larger dt further right) and event reference (dashed)",
         22,
     )?;
     let panels = root.split_evenly((1, 3));
