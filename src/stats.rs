@@ -4,9 +4,10 @@
 //! threshold (criterion.rs' `compare_to_threshold`). No I/O and no clock: the same
 //! numbers give the same answer. The statistics of a run's observables as a time series
 //! (equilibration cut, blocked errors, replicas) are in [`series`], applied to a run's
-//! block series in [`observables`].
+//! block series in [`observables`], compared with [`reference`] values.
 
 pub mod observables;
+pub mod reference;
 pub mod series;
 
 use rand::{RngExt, SeedableRng};

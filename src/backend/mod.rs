@@ -29,6 +29,7 @@ use crate::sim::observe::{
 use crate::sim::scene::PlacementError;
 use crate::sim::{Boundary, Particles, StepCounters};
 use crate::stats::observables::analyse;
+use crate::stats::reference::hard_disk_z;
 pub use crate::system::machine::{CpuScope, timed};
 use crate::system::machine::{LoopSeconds, cpu_seconds, usable_cpus};
 
@@ -235,6 +236,9 @@ pub fn summarize(
     let production = observed.and_then(|o| o.settled);
     let means = production.or(observed.map(|o| o.from_zero));
     let area = prepared.scene.domain.area();
+    let reference = hard_disk_fluid(prepared, last)
+        .then(|| hard_disk_z(prepared.initial.packing))
+        .flatten();
         broadphase: prepared.params.broadphase.name().to_owned(),
         packing: prepared.initial.packing,
         seed: prepared.seed,
@@ -306,6 +310,9 @@ pub fn summarize(
         temperature_curve: accuracy.temperature_curve.clone(),
         rms_step_over_radius: rms_step_over_radius(prepared),
         choice: prepared.choice.clone(),
+        z_reference: reference.map(|r| r.z),
+        z_reference_se: reference.map(|r| r.se),
+        z_reference_source: reference.map(|r| r.source.to_owned()),
     }
 }
 
@@ -381,6 +388,16 @@ fn conserved_energy_error(
     let field_in_periodic_box =
         scene.physics.gravity.is_some() && scene.domain.boundary == Boundary::Periodic;
     let initial = initial_kinetic + prepared.initial.potential_energy;
+/// Whether the run is the fluid the reference equations of state describe: equal
+/// elastic disks in a periodic box without a field.
+fn hard_disk_fluid(prepared: &PreparedRun, last: &Particles) -> bool {
+    let scene = &prepared.scene;
+    scene.domain.boundary == Boundary::Periodic
+        && scene.physics.is_elastic()
+        && scene.physics.gravity.is_none()
+        && last.max_radius() == prepared.initial.min_radius
+}
+
     (scene.physics.is_elastic() && !field_in_periodic_box && initial > 0.0)
         .then(|| (last_kinetic + last_potential - initial) / initial)
 }

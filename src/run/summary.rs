@@ -6,6 +6,7 @@ use std::fmt;
 use serde::{Deserialize, Serialize};
 
 use crate::stats::observables::MIN_EFFECTIVE_POINTS;
+use crate::stats::reference::{Reference, z_score};
 
 /// One run's measurements. Field names are a public interface: scripts and the study
 /// driver read them. Times are wall-clock seconds.
@@ -126,14 +127,6 @@ pub struct RunSummary {
     /// Z = P·A / (n·T̄).
     #[serde(default)]
     pub compressibility_z: Option<f64>,
-    /// Pairs whose straight paths came within contact during a step without an impulse
-    /// (exact swept test): 0 for the event method; for the step method only with
-    /// `observe = "accuracy"` on the serial backend, else null.
-    #[serde(default)]
-    pub missed_collisions: Option<u64>,
-    /// missed_collisions / (missed_collisions + pair_collisions), null when either is.
-    #[serde(default)]
-    pub missed_collision_fraction: Option<f64>,
     /// Whether the run's observables settled: true when the block series was cut (by
     /// MSER-5) and collision_rate, temperature, pressure and compressibility_z are means
     /// after the cut; false ("not equilibrated: run longer") when they are averages from
@@ -177,6 +170,23 @@ pub struct RunSummary {
     /// null otherwise (then energy loss is physics: see `temperature_curve`).
     #[serde(default)]
     pub energy_relative_error: Option<f64>,
+    /// Equal elastic disks in a periodic box without a field: the reference Z at this
+    /// packing (an equation of state, or a tabulated value with its N and box), its
+    /// standard uncertainty and its source; null elsewhere.
+    #[serde(default)]
+    pub z_reference: Option<f64>,
+    #[serde(default)]
+    pub z_reference_se: Option<f64>,
+    #[serde(default)]
+    pub z_reference_source: Option<String>,
+    /// Pairs whose straight paths came within contact during a step without an impulse
+    /// (exact swept test): 0 for the event method; for the step method only with
+    /// `observe = "accuracy"` on the serial backend, else null.
+    #[serde(default)]
+    pub missed_collisions: Option<u64>,
+    /// missed_collisions / (missed_collisions + pair_collisions), null when either is.
+    #[serde(default)]
+    pub missed_collision_fraction: Option<f64>,
     /// Event method with e < 1: collisions the TC model made elastic; else null.
     #[serde(default)]
     pub collapse_guard_fired: Option<u64>,
@@ -345,21 +355,6 @@ impl RunSummary {
         )
     }
 
-    /// The method, its accuracy measures, the collapse guard and any automatic choice.
-    fn write_method_and_accuracy(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let show =
-            |value: Option<f64>| value.map_or_else(|| "n/a".to_owned(), |v| format!("{v:.4e}"));
-        let count = |value: Option<u64>| value.map_or_else(|| "n/a".to_owned(), |v| v.to_string());
-        writeln!(
-            f,
-            "method     {} ({}), events/s {}",
-            self.method,
-            self.observe,
-            show(self.events_per_s)
-        )?;
-        writeln!(
-            f,
-            "accuracy   collision rate {}, pressure {}, Z {}, missed {} (fraction {}), mean overlap {}",
     /// The equilibration cut and the error bars of the observables, with the warnings.
     fn write_equilibration(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match (
@@ -403,7 +398,35 @@ impl RunSummary {
                 "Z is worth {n_eff:.0} independent points (under {MIN_EFFECTIVE_POINTS:.0}): \
                  its error bar is itself uncertain; run longer"
             ));
-        }
+        }?;
+        self.write_reference(f)
+    }
+
+    /// The reference Z and how far this run is from it, in combined standard errors.
+    fn write_reference(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (Some(z_ref), Some(se_ref), Some(source)) = (
+            self.z_reference,
+            self.z_reference_se,
+            &self.z_reference_source,
+        ) else {
+            return Ok(());
+        };
+        let reference = Reference {
+            z: z_ref,
+            se: se_ref,
+            source: "",
+        };
+        let comparison = match (self.compressibility_z, self.compressibility_z_se) {
+            (Some(z), Some(se)) if self.equilibrated == Some(true) => format!(
+                "this run {z:.5} ± {se:.5}, z-score {:+.2}",
+                z_score(z, se, &reference)
+            ),
+            _ => "this run not equilibrated: run longer (no comparison)".to_owned(),
+        };
+        writeln!(
+            f,
+            "reference  Z = {z_ref:.5} ± {se_ref:.5} ({source}); {comparison}"
+        )
         if self.compressibility_z_plateau == Some(false) {
             warnings.push(
                 "the blocking curve of Z has no plateau: its error bar may be too small; \
@@ -429,6 +452,21 @@ impl RunSummary {
             )?;
         }
         if let Some(time) = self.collapse_time {
+    /// The method, its accuracy measures, the collapse guard and any automatic choice.
+    fn write_method_and_accuracy(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let show =
+            |value: Option<f64>| value.map_or_else(|| "n/a".to_owned(), |v| format!("{v:.4e}"));
+        let count = |value: Option<u64>| value.map_or_else(|| "n/a".to_owned(), |v| v.to_string());
+        writeln!(
+            f,
+            "method     {} ({}), events/s {}",
+            self.method,
+            self.observe,
+            show(self.events_per_s)
+        )?;
+        writeln!(
+            f,
+            "accuracy   collision rate {}, pressure {}, Z {}, missed {} (fraction {}), mean overlap {}",
             writeln!(
                 f,
                 "collapse   inelastic collapse detected at t = {time:.6e}: the event method stopped there, in step {}",
