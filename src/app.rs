@@ -277,6 +277,7 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
         programs: vec![runner::Program::this()?],
         calibrate: false,
         mpi_yields_when_idle: false,
+        system: args.system.clone(),
     };
     let outcome = runner::run_study(&study, &text, &options)?;
     crate::outln!(
@@ -431,9 +432,22 @@ fn run_mpi(
             None => Finished::OtherRank,
         });
     }
-    let launch = launcher::Launch {
+    let site = match &args.system {
+        Some(system) => crate::cluster::site::Site::find(system)?,
+        None => crate::cluster::site::Site::from_launcher(&args.launcher)
+            .map_err(|reason| anyhow::anyhow!("--launcher: {reason}"))?,
+    };
+    let layout = crate::cluster::placement::Layout {
+        nodes: args.nodes.map_or(1, NonZeroUsize::get),
         ranks: ranks.map_or_else(usable_cpus, NonZeroUsize::get),
-        launcher: args.launcher.clone(),
+        threads: 1,
+    };
+    layout
+        .check(&site, true)
+        .map_err(|reason| anyhow::anyhow!("--nodes and --ranks: {reason}"))?;
+    let launch = launcher::Launch {
+        layout,
+        site,
         timeout: std::time::Duration::from_secs_f64(mpi_timeout(args)?),
     };
     // The ranks run this same command line; rank 0 answers in JSON.
@@ -491,6 +505,9 @@ fn backend_spec(args: &SimulateArgs, machine: &Machine) -> anyhow::Result<Backen
     }
     if args.ranks.is_some() && name != BackendKind::Mpi {
         bail!("--ranks sets the MPI process count; add `--backend mpi` or drop --ranks");
+    }
+    if args.nodes.is_some() && name != BackendKind::Mpi {
+        bail!("--nodes spreads MPI ranks over nodes; add `--backend mpi` or drop --nodes");
     }
     for (flag, workers) in [("--threads", args.threads), ("--ranks", args.ranks)] {
         if let Some(workers) = workers {

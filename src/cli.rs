@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
+use crate::cluster::site::LOCAL;
 use crate::run::backend_kind::{BackendKind, MPI_LAUNCHER};
 use crate::run::overrides::Overrides;
 
@@ -50,7 +51,9 @@ Examples:
   Continue a study that was interrupted, running only the missing repetitions
     collide run experiments/seed-report.toml --resume
   Records elsewhere, no report (write it later with `collide report`)
-    collide run experiments/accuracy.toml --out /tmp/results --no-report";
+    collide run experiments/accuracy.toml --out /tmp/results --no-report
+  Each run submitted as a Slurm job, as systems/slurm-local.toml describes the site
+    collide run experiments/quick.toml --system slurm-local";
 
 const RESULTS_EXAMPLES: &str = "\
 Examples:
@@ -250,6 +253,11 @@ pub struct RunArgs {
     /// Write no report: print the table only (`collide report` writes it later).
     #[arg(long, conflicts_with = "reports")]
     pub no_report: bool,
+    /// Where MPI runs go: `local` (this host, mpirun), NAME for systems/NAME.toml, or
+    /// the path of a site file (docs/clusters.md); a batch scheduler's site submits each
+    /// run as a job.
+    #[arg(long, value_name = "NAME|PATH", default_value = LOCAL)]
+    pub system: String,
 }
 
 #[derive(Debug, Args)]
@@ -287,6 +295,13 @@ pub struct SimulateArgs {
     /// (e.g. "mpirun --bind-to core", or "mpiexec" for MPICH).
     #[arg(long, env = "COLLIDE_MPI_LAUNCHER", default_value = MPI_LAUNCHER)]
     pub launcher: String,
+    /// Start the ranks as the site file at PATH (or systems/NAME.toml) says, instead of
+    /// as --launcher says (with --backend mpi).
+    #[arg(long, value_name = "NAME|PATH")]
+    pub system: Option<String>,
+    /// Nodes to spread the ranks over (with --backend mpi; a site's launcher places them).
+    #[arg(long, value_parser = parse_workers, allow_negative_numbers = true)]
+    pub nodes: Option<NonZeroUsize>,
     /// Seconds before a launched MPI run is killed with all its ranks [default: the
     /// environment's COLLIDE_MPI_TIMEOUT, else 3600]. Read only with --backend mpi.
     #[arg(long, value_parser = parse_seconds)]

@@ -11,6 +11,7 @@ pub mod app;
 pub mod backend;
 pub mod check;
 pub mod cli;
+pub mod cluster;
 pub mod draw;
 pub mod exit;
 pub mod report;

@@ -6,6 +6,7 @@ mod auto;
 mod backends;
 mod check;
 mod cli;
+mod cluster;
 mod equilibrium;
 mod faults;
 mod golden;

@@ -1,12 +1,17 @@
-//! Starting MPI ranks for `collide simulate --backend mpi --ranks N`: runs the launcher
-//! (`mpirun` unless configured) on this very binary, under a timeout, and reads rank
-//! 0's JSON summary from the last line of its output.
+//! Starting MPI ranks for `collide simulate --backend mpi --ranks N`: renders the site's
+//! launcher line for the ranks' layout (`mpirun` on this host unless `--system` or
+//! `--launcher` says otherwise: [`crate::cluster::render`]), runs it on this very
+//! binary under a timeout, and reads rank 0's JSON summary from the last line of its
+//! output.
 
 use std::ffi::OsString;
 use std::process::Command;
 use std::time::Duration;
 
 use crate::backend::BackendError;
+use crate::cluster::placement::Layout;
+use crate::cluster::render::launch_line;
+use crate::cluster::site::Site;
 use crate::run::summary::RunSummary;
 use crate::system::machine::{USABLE_CPUS_ENV, usable_cpus};
 use crate::system::process::{Ended, run_with_timeout, stop_children_on_interrupt, tail};
@@ -14,10 +19,10 @@ use crate::system::process::{Ended, run_with_timeout, stop_children_on_interrupt
 /// How to start the ranks.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Launch {
-    pub ranks: usize,
-    /// The launcher and its own options, split at whitespace, e.g. `mpirun --bind-to core`;
-    /// `-n RANKS`, this binary and its arguments follow.
-    pub launcher: String,
+    /// Nodes, ranks and threads per rank.
+    pub layout: Layout,
+    /// The site whose launcher starts them: `--system`, or the site `--launcher` means.
+    pub site: Site,
     pub timeout: Duration,
 }
 
@@ -25,19 +30,16 @@ pub struct Launch {
 /// returns rank 0's summary. A launcher that fails, or outlives the timeout (it is
 /// killed with all its ranks), is an error that quotes the end of its output.
 pub fn launch(launch: &Launch, args: &[OsString]) -> Result<RunSummary, BackendError> {
-    let mut words = launch.launcher.split_whitespace();
-    let program = words
-        .next()
+    let line = launch_line(&launch.site, launch.layout);
+    let shown = line.argv.join(" ");
+    let (program, words) = line
+        .argv
+        .split_first()
         .ok_or_else(|| BackendError::Mpi("the MPI launcher command is empty".into()))?;
     let exe = std::env::current_exe()
         .map_err(|e| BackendError::Mpi(format!("cannot find this program's path: {e}")))?;
     let mut command = Command::new(program);
-    command
-        .args(words)
-        .arg("-n")
-        .arg(launch.ranks.to_string())
-        .arg(exe)
-        .args(args);
+    command.args(words).arg(exe).args(args).envs(line.env);
     if running_as_root() {
         // OpenMPI refuses root without these; other MPIs ignore them.
         command
@@ -45,7 +47,7 @@ pub fn launch(launch: &Launch, args: &[OsString]) -> Result<RunSummary, BackendE
             .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1");
     }
     let cpus = usable_cpus();
-    if launch.ranks > cpus {
+    if launch.layout.ranks > cpus {
         // More ranks than CPUs: allowed (and flagged in the summary), not refused.
         command.env("OMPI_MCA_rmaps_base_oversubscribe", "1");
     }
@@ -56,7 +58,7 @@ pub fn launch(launch: &Launch, args: &[OsString]) -> Result<RunSummary, BackendE
     let ended = run_with_timeout(command, launch.timeout).map_err(|e| {
         BackendError::Mpi(format!(
             "cannot start `{program}`: {e}; install OpenMPI (`apt-get install openmpi-bin`) \
-             or name your launcher with --launcher or COLLIDE_MPI_LAUNCHER"
+             or name your launcher with --launcher, COLLIDE_MPI_LAUNCHER or --system"
         ))
     })?;
     let (status, stdout, stderr) = match ended {
@@ -69,7 +71,7 @@ pub fn launch(launch: &Launch, args: &[OsString]) -> Result<RunSummary, BackendE
             return Err(BackendError::Mpi(format!(
                 "the {} ranks did not finish within {} s and were killed; raise --mpi-timeout \
                  (or COLLIDE_MPI_TIMEOUT) if the run is just long{}",
-                launch.ranks,
+                launch.layout.ranks,
                 launch.timeout.as_secs_f64(),
                 tail("their last output", &stderr)
             )));
@@ -77,8 +79,7 @@ pub fn launch(launch: &Launch, args: &[OsString]) -> Result<RunSummary, BackendE
     };
     if !status.success() {
         return Err(BackendError::Mpi(format!(
-            "`{}` failed ({status}){}",
-            launch.launcher,
+            "`{shown}` failed ({status}){}",
             tail("its output", &stderr)
         )));
     }

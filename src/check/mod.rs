@@ -148,6 +148,7 @@ fn measure(
         programs,
         calibrate: true,
         mpi_yields_when_idle: true,
+        system: crate::cluster::site::LOCAL.to_owned(),
     };
     let outcome = runner::run_study(study, manifest_text, &run_options)?;
     if outcome.failed > 0 {

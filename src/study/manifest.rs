@@ -82,6 +82,8 @@ pub struct Configuration {
     pub backend: BackendKind,
     /// Threads (rayon), ranks (MPI) or 1 (serial).
     pub workers: usize,
+    /// Nodes the ranks spread over (`[placement] nodes`; 1 unless MPI).
+    pub nodes: usize,
     /// Run worker counts above the ceiling of [`crate::run::limits`] (`[backends]
     /// oversubscribe = true`); not part of the key.
     pub oversubscribe: bool,
@@ -94,7 +96,7 @@ pub struct Configuration {
 
 /// The entries of a configuration's key that place its runs (backend, workers) rather
 /// than say what they compute: a record's setup is its key without them.
-pub const PLACEMENT_KEYS: [&str; 2] = ["backend=", "workers="];
+pub const PLACEMENT_KEYS: [&str; 3] = ["backend=", "workers=", "nodes="];
 
 impl Configuration {
     /// A stable text key naming the configuration: the same in every run of the same
@@ -110,14 +112,29 @@ impl Configuration {
                 when_set.push_str(&format!(";{name}={value}"));
             }
         }
-        let [backend, workers] = PLACEMENT_KEYS;
+        let [backend, workers, nodes] = PLACEMENT_KEYS;
+        // One node is left out, so that keys written before placements still resume.
+        let nodes = match self.nodes {
+            1 => String::new(),
+            count => format!(";{nodes}{count}"),
+        };
         format!(
-            "scene={};{};{backend}{};{workers}{}{when_set}",
+            "scene={};{};{backend}{};{workers}{}{nodes}{when_set}",
             self.scene,
             always.join(";"),
             self.backend.name(),
             self.workers
         )
+    }
+
+    /// Where its runs' ranks and threads go: nodes × ranks × threads.
+    pub fn layout(&self) -> crate::cluster::placement::Layout {
+        let placement = self.backend.placement(self.workers);
+        crate::cluster::placement::Layout {
+            nodes: self.nodes,
+            ranks: placement.ranks,
+            threads: placement.threads,
+        }
     }
 
     /// The `collide simulate` arguments after the scene path.
@@ -134,6 +151,9 @@ impl Configuration {
         args.extend(["--backend".to_owned(), self.backend.name().to_owned()]);
         if let Some(flag) = self.backend.workers_flag() {
             args.extend([flag.to_owned(), self.workers.to_string()]);
+        }
+        if self.nodes > 1 {
+            args.extend(["--nodes".to_owned(), self.nodes.to_string()]);
         }
         if self.oversubscribe {
             args.push("--oversubscribe".to_owned());
@@ -163,6 +183,22 @@ struct RawManifest {
     #[serde(default)]
     sweep: SweepLists,
     backends: Spanned<RawBackends>,
+    placement: Option<Spanned<RawPlacement>>,
+}
+
+/// Where MPI ranks go: each list a sweep, multiplying the `mpi` rank counts.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPlacement {
+    #[serde(default = "one")]
+    nodes: Vec<i64>,
+    /// Threads per rank: the hybrid backend is not built yet, so 1 only.
+    #[serde(default = "one")]
+    threads: Vec<i64>,
+}
+
+fn one() -> Vec<i64> {
+    vec![1]
 }
 
 #[derive(Deserialize)]
@@ -340,11 +376,16 @@ fn configurations(
             "`scenes` is empty; add a [[scenes]] entry with `file = ...` or inline tables".into(),
         ));
     }
-    let n_configurations = raw.scenes.get_ref().len() * points.len() * backends.len();
+    let n_nodes = raw
+        .placement
+        .as_ref()
+        .map_or(1, |p| p.get_ref().nodes.len().max(1));
+    let n_configurations = raw.scenes.get_ref().len() * points.len() * backends.len() * n_nodes;
     check_study_size(at, raw, n_configurations, &repetitions)?;
     let folder = at.path.parent().unwrap_or(Path::new("."));
     let mut configurations = Vec::new();
     let mut seen = BTreeSet::new();
+    let placed = placed(at, raw, &backends)?;
     for entry in raw.scenes.get_ref() {
         let offset = entry.span().start;
         if let Some(name) = &entry.get_ref().name {
@@ -355,7 +396,7 @@ fn configurations(
         let (scene, input) =
             scene_input(entry.get_ref(), folder).map_err(|message| at.invalid(offset, message))?;
         for point in &points {
-            for &(backend, workers) in &backends {
+            for &(backend, workers, nodes) in &placed {
                 let mut overrides = point.clone();
                 if scaling == Scaling::Weak {
                     let n = weak_n(&input, &overrides, workers).map_err(|message| {
@@ -378,6 +419,7 @@ fn configurations(
                     overrides,
                     backend,
                     workers,
+                    nodes,
                     oversubscribe: raw.backends.get_ref().oversubscribe,
                     repetitions: repetitions[backend as usize],
                     footprint,
@@ -396,6 +438,58 @@ fn configurations(
         }
     }
     Ok(configurations)
+}
+
+/// Each (backend, workers) with the node counts of `[placement]`: MPI ranks on each count
+/// that divides them evenly, every other backend on one node; threads per rank above 1
+/// are refused until the hybrid backend exists.
+fn placed(
+    at: &Locator,
+    raw: &RawManifest,
+    backends: &[(BackendKind, usize)],
+) -> Result<Vec<(BackendKind, usize, usize)>, ManifestError> {
+    let Some(placement) = &raw.placement else {
+        return Ok(backends.iter().map(|&(b, w)| (b, w, 1)).collect());
+    };
+    let offset = placement.span().start;
+    let (nodes, threads) = (&placement.get_ref().nodes, &placement.get_ref().threads);
+    if nodes.is_empty() || nodes.iter().any(|&n| n < 1) || threads.is_empty() {
+        return Err(at.invalid(
+            offset,
+            "`placement.nodes` and `placement.threads` each list whole numbers of at least 1"
+                .into(),
+        ));
+    }
+    if threads.iter().any(|&t| t != 1) {
+        return Err(at.invalid(
+            offset,
+            "`placement.threads` asks for more than one thread per MPI rank, and the hybrid \
+             backend (ranks × threads) is not built yet: each rank steps on one thread; use \
+             `threads = [1]`, or rayon's threads in one process (`rayon = [...]`)"
+                .into(),
+        ));
+    }
+    let mut placed = Vec::new();
+    for &(backend, workers) in backends {
+        if !backend.capabilities().mpi {
+            placed.push((backend, workers, 1));
+            continue;
+        }
+        for &count in nodes {
+            let count = count as usize;
+            if workers % count != 0 {
+                return Err(at.invalid(
+                    offset,
+                    format!(
+                        "`placement.nodes` = {count} does not divide the {workers} ranks of \
+                         `backends.mpi` evenly; give node counts that divide every rank count"
+                    ),
+                ));
+            }
+            placed.push((backend, workers, count));
+        }
+    }
+    Ok(placed)
 }
 
 /// Refuses, before anything is expanded, a study of more than [`MAX_CONFIGURATIONS`]

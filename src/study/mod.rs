@@ -5,6 +5,7 @@
 //! CI check's verdicts over commits (`history`). A study never calls a backend or the
 //! simulation itself.
 
+pub mod batch;
 pub mod environment;
 pub mod history;
 pub mod manifest;

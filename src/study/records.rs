@@ -16,7 +16,7 @@ use crate::study::environment::Environment;
 use crate::study::manifest::{PLACEMENT_KEYS, Scaling};
 use crate::system::output::write_atomically;
 
-pub const SCHEMA_VERSION: u32 = 10;
+pub const SCHEMA_VERSION: u32 = 11;
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
 const OLDEST_READABLE_VERSION: u32 = 1;
 
@@ -78,6 +78,10 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     (9, "collectives_per_step", Fill::F64(f64::NAN)),
     // Version 9 did not record the scene's contents, only its name.
     (10, "scene_hash", Fill::Str("")),
+    // Version 10 ran every run on this host, never as a batch job.
+    (11, "job_id", Fill::Str("")),
+    (11, "node_list", Fill::Str("")),
+    (11, "queue_wait_s", Fill::F64(f64::NAN)),
 ];
 
 /// What became of one run.
@@ -394,7 +398,8 @@ macro_rules! for_each_column {
                  boundary <- run, broadphase <- run, state_hash <- run, hostname, cpu_model, os,
                  rustc, profile, features, git_commit, mpi_library, study_started_utc,
                  finished_utc, method <- run, observe <- run, choice <- run,
-                 temperature_curve <- run, cpu_affinity, ab_side, scene_hash;
+                 temperature_curve <- run, cpu_affinity, ab_side, scene_hash, job_id,
+                 node_list;
             u64: threads <- run, ranks <- run, workers <- run, n <- run, steps <- run,
                  pair_collisions <- run, wall_collisions <- run, logical_cores, physical_cores,
                  memory_bytes;
@@ -412,7 +417,7 @@ macro_rules! for_each_column {
                  temperature <- run, pressure <- run, compressibility_z <- run,
                  missed_collision_fraction <- run, mean_overlap <- run,
                  energy_relative_error <- run, rms_step_over_radius <- run,
-                 collapse_time <- run, tc <- run;
+                 collapse_time <- run, tc <- run, queue_wait_s;
             bool: oversubscribed <- run, git_dirty;
             opt_u64: seed <- run, missed_collisions <- run, collapse_guard_fired <- run,
                  usable_cpus

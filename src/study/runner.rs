@@ -18,8 +18,12 @@ use std::time::Duration;
 use anyhow::{Context, anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::cluster::render::{Job, job_script};
+use crate::cluster::site::{LOCAL, Site};
+use crate::cluster::slurm::JobState;
 use crate::run::backend_kind::BackendKind;
 use crate::run::summary::RunSummary;
+use crate::study::batch::{self, BatchJob, JobEnd};
 use crate::study::environment::Environment;
 use crate::study::manifest::{Configuration, SceneInput, Study};
 use crate::study::records::{
@@ -51,6 +55,9 @@ pub struct RunOptions {
     /// of polling, unless the environment already says: the check's MPI timings vary
     /// less from run to run that way on a machine with as many cores as ranks.
     pub mpi_yields_when_idle: bool,
+    /// Where MPI runs go (`--system`): `local`, a site's NAME or a site file's path; a
+    /// batch scheduler's site submits every run as a job ([`crate::study::batch`]).
+    pub system: String,
 }
 
 /// The OpenMPI setting (an environment variable `mpirun` passes to its ranks) that makes
@@ -143,6 +150,7 @@ pub fn run_study(
         }
     };
     let configurations = runnable(study)?;
+    let site = placed_on_site(study, &configurations, &options.system)?;
     let environment = Environment::capture();
     let dir = options.out.join(&study.name);
     let _held = open_results_folder(&dir, &note)?;
@@ -175,7 +183,38 @@ pub fn run_study(
         started_utc: records::utc_now(),
         results,
     };
-    sitting.run(&todo, rows, options, quiet, &note)
+    match site.is_batch() {
+        true => sitting.run_batch(&todo, rows, options, &site, &note),
+        false => sitting.run(&todo, rows, options, quiet, &note),
+    }
+}
+
+/// The site `system` names, once every configuration's layout fits it (or insists).
+fn placed_on_site(
+    study: &Study,
+    configurations: &[&Configuration],
+    system: &str,
+) -> anyhow::Result<Site> {
+    let site = Site::find(system)?;
+    // On `local`, the manifest's own checks against this machine hold; elsewhere the
+    // site places MPI runs, and with a scheduler every run.
+    let placed = configurations.iter().filter(|configuration| {
+        system != LOCAL && (site.is_batch() || configuration.backend.capabilities().mpi)
+    });
+    for configuration in placed {
+        configuration
+            .layout()
+            .check(&site, configuration.oversubscribe)
+            .map_err(|reason| {
+                anyhow!(
+                    "{}: {} on the site `{}`: {reason}",
+                    study.manifest.display(),
+                    configuration.key(),
+                    site.name
+                )
+            })?;
+    }
+    Ok(site)
 }
 
 /// Every run a study asks for, round by round: (repetition, configuration index, its
@@ -236,6 +275,7 @@ impl Sitting<'_> {
         let children = Children {
             exe: this_exe()?,
             timeout: self.study.timeout,
+            system: (options.system != LOCAL).then(|| options.system.clone()),
             // The environment's own setting, if any, wins.
             mpi_yields_when_idle: options.mpi_yields_when_idle
                 && std::env::var_os(YIELD_WHEN_IDLE).is_none(),
@@ -313,7 +353,15 @@ impl Sitting<'_> {
         key: &str,
     ) -> Record {
         let configuration = self.configurations[c];
-        let context = RecordContext {
+        let context = self.context(rep, c, key);
+        children.measure(program, configuration, &self.scene_files[c], &context)
+    }
+
+    /// What the row of repetition `rep` of configuration `c` (its key `key`) records
+    /// besides the run's own result.
+    fn context<'s>(&'s self, rep: u32, c: usize, key: &'s str) -> RecordContext<'s> {
+        let configuration = self.configurations[c];
+        RecordContext {
             study: &self.study.name,
             manifest_hash: &self.manifest_hash,
             build_id: &self.build_id,
@@ -326,8 +374,102 @@ impl Sitting<'_> {
             repetition: rep,
             environment: &self.environment,
             study_started_utc: &self.started_utc,
+        }
+    }
+
+    /// Runs `todo` as batch jobs on `site`'s queue (no warm-ups: every job is a fresh
+    /// allocation), adding each row to `rows` as its job ends and writing them all.
+    fn run_batch(
+        &self,
+        todo: &[(u32, usize)],
+        mut rows: Vec<Record>,
+        options: &RunOptions,
+        site: &Site,
+        note: &dyn Fn(&str),
+    ) -> anyhow::Result<StudyOutcome> {
+        let kept_note =
+            |rows: &[Record]| interrupted_note(rows, &self.results, &options.continue_with);
+        *interrupt_note() = kept_note(&rows);
+        let kept = rows.len();
+        note(&self.announcement());
+        let workdir = std::env::current_dir().context("cannot read the working folder")?;
+        let folder = self.results.parent().unwrap_or(Path::new("."));
+        let dir = workdir.join(folder).join("jobs");
+        let mut site = site.clone();
+        // Without a limit of its own, a job gets the study's timeout, in whole minutes.
+        let minutes = self.study.timeout.as_secs().div_ceil(60).max(1);
+        site.time_limit
+            .get_or_insert_with(|| format!("{:02}:{:02}:00", minutes / 60, minutes % 60));
+        let exe = this_exe()?.display().to_string();
+        let jobs: Vec<BatchJob> = todo
+            .iter()
+            .map(|&(rep, c)| {
+                let configuration = self.configurations[c];
+                let name = format!("{}-r{rep}", text_hash(&configuration.key()));
+                let mut program = vec![
+                    exe.clone(),
+                    "simulate".to_owned(),
+                    self.scene_files[c].display().to_string(),
+                ];
+                program.extend(configuration.simulate_args());
+                let job = Job {
+                    name: &name,
+                    dir: &dir,
+                    workdir: &workdir,
+                    program: &program,
+                };
+                let script = job_script(&site, configuration.layout(), &job);
+                BatchJob { name, script }
+            })
+            .collect();
+        let (mut measured, mut failed) = (0, 0);
+        let mut collect = |index: usize, end: JobEnd| -> anyhow::Result<()> {
+            let (rep, c) = todo[index];
+            let key = self.configurations[c].key();
+            let context = self.context(rep, c, &key);
+            let mut record = match end.code {
+                Some(code) => {
+                    let ended = Ended::Exited {
+                        status: std::os::unix::process::ExitStatusExt::from_raw(code << 8),
+                        stdout: end.stdout.clone(),
+                        stderr: end.stderr.clone(),
+                    };
+                    record_of(&context, Ok(ended), self.study.timeout)
+                }
+                None => {
+                    let status = match end.info.state {
+                        JobState::TimedOut => STATUS_TIMED_OUT,
+                        _ => STATUS_FAILED,
+                    };
+                    Record::failed(&context, status, batch::no_exit_code(&end))
+                }
+            };
+            record.job_id = end.id;
+            record.node_list = end.info.nodes;
+            record.queue_wait_s = end.info.queue_wait_s.unwrap_or(f64::NAN);
+            if record.status == STATUS_OK {
+                measured += 1;
+            } else {
+                failed += 1;
+                eprintln!("run failed: {key}: {}", record.error);
+            }
+            rows.push(record);
+            let mut interrupted = interrupt_note();
+            records::write(&self.results, &rows)?;
+            *interrupted = kept_note(&rows);
+            Ok(())
         };
-        children.measure(program, configuration, &self.scene_files[c], &context)
+        batch::run_jobs(&dir, &jobs, &mut collect, note)?;
+        if !todo.is_empty() {
+            record_load_at_end(&self.results, &mut rows, kept)?;
+        }
+        Ok(StudyOutcome {
+            results: self.results.clone(),
+            measured,
+            failed,
+            kept,
+            calibrations: Vec::new(),
+        })
     }
 }
 
@@ -413,6 +555,8 @@ fn interrupted_note(rows: &[Record], results: &Path, continue_with: &str) -> Opt
 struct Children {
     exe: PathBuf,
     timeout: Duration,
+    /// The site MPI runs start on, when not `local` (`--system`).
+    system: Option<String>,
     /// Start MPI runs with [`YIELD_WHEN_IDLE`] set.
     mpi_yields_when_idle: bool,
 }
@@ -433,6 +577,11 @@ impl Children {
             .args(program.slowdown.simulate_args(configuration.backend));
         if self.mpi_yields_when_idle && configuration.backend.capabilities().mpi {
             command.env(YIELD_WHEN_IDLE, "1");
+        }
+        if let Some(system) = self.system.as_ref() {
+            if configuration.backend.capabilities().mpi {
+                command.args(["--system", system]);
+            }
         }
         run_with_timeout(command, self.timeout)
     }
