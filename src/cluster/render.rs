@@ -13,7 +13,7 @@
 use std::path::Path;
 
 use crate::cluster::placement::Layout;
-use crate::cluster::site::{Launcher, Scheduler, Site};
+use crate::cluster::site::{Bind, Launcher, Scheduler, Site};
 
 /// The variable that sets the size of each rank's rayon pool.
 pub const THREADS_ENV: &str = "RAYON_NUM_THREADS";
@@ -38,6 +38,7 @@ pub fn launch_line(site: &Site, layout: Layout) -> Line {
     } = layout;
     let per_node = layout.ranks_per_node();
     let over = layout.oversubscribes(site);
+    let pin = site.bind == Bind::Cores;
     let mut env = vec![(THREADS_ENV.to_owned(), threads.to_string())];
     if over {
         env.push((YIELD_WHEN_IDLE.to_owned(), "1".to_owned()));
@@ -58,7 +59,8 @@ pub fn launch_line(site: &Site, layout: Layout) -> Line {
                 words.extend(["--map-by".into(), format!("slot:PE={threads}")]);
             }
             if nodes > 1 || threads > 1 {
-                words.extend(["--bind-to".into(), "core".into()]);
+                let to = if pin { "core" } else { "none" };
+                words.extend(["--bind-to".into(), to.into()]);
             }
             if over {
                 words.push("--oversubscribe".into());
@@ -76,7 +78,7 @@ pub fn launch_line(site: &Site, layout: Layout) -> Line {
             if nodes > 1 {
                 words.extend(["-ppn".into(), per_node.to_string()]);
             }
-            if threads > 1 {
+            if threads > 1 && pin {
                 words.extend(["-bind-to".into(), format!("core:{threads}")]);
             }
             words
@@ -87,7 +89,7 @@ pub fn launch_line(site: &Site, layout: Layout) -> Line {
                 format!("--ntasks={ranks}"),
                 format!("--ntasks-per-node={per_node}"),
                 format!("--cpus-per-task={threads}"),
-                "--cpu-bind=cores".to_owned(),
+                format!("--cpu-bind={}", site.bind.name()),
             ];
             if over {
                 words.push("--overcommit".into());
@@ -99,7 +101,7 @@ pub fn launch_line(site: &Site, layout: Layout) -> Line {
             format!("--ntasks={ranks}"),
             format!("--cores-per-task={threads}"),
             "-o".to_owned(),
-            "cpu-affinity=per-task".to_owned(),
+            format!("cpu-affinity={}", if pin { "per-task" } else { "off" }),
         ],
     };
     argv.extend(words);

@@ -93,6 +93,28 @@ impl Launcher {
     }
 }
 
+/// Whether ranks are pinned to their cores.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Bind {
+    /// Each rank to its own cores (its threads' worth): the default.
+    Cores,
+    /// Not pinned: where the nodes declare cores the host lacks (emulated nodes), the
+    /// launcher cannot pin to them.
+    None,
+}
+
+impl Bind {
+    const ALL: [Bind; 2] = [Bind::Cores, Bind::None];
+
+    /// The name a site file writes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Bind::Cores => "cores",
+            Bind::None => "none",
+        }
+    }
+}
+
 /// A validated site.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Site {
@@ -103,6 +125,7 @@ pub struct Site {
     /// The launcher's command words (`mpirun`, `/opt/mpich/bin/mpiexec`, `flux run`).
     pub command: Vec<String>,
     pub cores_per_node: usize,
+    pub bind: Bind,
     /// The most nodes a placement may ask for.
     pub max_nodes: usize,
     pub partition: Option<String>,
@@ -126,6 +149,7 @@ impl Site {
             launcher: Launcher::Mpirun,
             command: vec![Launcher::Mpirun.name().to_owned()],
             cores_per_node: crate::system::machine::usable_cpus(),
+            bind: Bind::Cores,
             max_nodes: 1,
             partition: None,
             account: None,
@@ -211,6 +235,7 @@ struct RawSite {
     /// The launcher's path when it is not on the PATH under its own name.
     launcher_path: Option<String>,
     cores_per_node: Spanned<i64>,
+    bind: Option<Spanned<String>>,
     max_nodes: Option<Spanned<i64>>,
     partition: Option<String>,
     account: Option<String>,
@@ -224,8 +249,8 @@ struct RawSite {
 }
 
 /// The keys a site file takes, for the error that names an unknown one.
-const KEYS: &str = "scheduler, launcher, launcher_path, cores_per_node, max_nodes, partition, \
-                    account, time_limit, scheduler_args, launcher_args, [env]";
+const KEYS: &str = "scheduler, launcher, launcher_path, cores_per_node, bind, max_nodes, \
+                    partition, account, time_limit, scheduler_args, launcher_args, [env]";
 
 /// Validates a site file's text; `path` names it in errors and gives the site its name.
 pub fn parse(path: &Path, text: &str) -> Result<Site, SiteError> {
@@ -298,6 +323,15 @@ pub fn parse(path: &Path, text: &str) -> Result<Site, SiteError> {
             })
     };
     let cores_per_node = positive(&raw.cores_per_node, "cores_per_node")?;
+    let bind = match &raw.bind {
+        None => Bind::Cores,
+        Some(bind) => one_of(&Bind::ALL, Bind::name, bind.get_ref()).map_err(|names| {
+            invalid(
+                bind.span().start,
+                format!("`bind` is {:?}; give one of {names}", bind.get_ref()),
+            )
+        })?,
+    };
     let max_nodes = match &raw.max_nodes {
         Some(value) => positive(value, "max_nodes")?,
         None => 1,
@@ -339,6 +373,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Site, SiteError> {
         launcher,
         command,
         cores_per_node,
+        bind,
         max_nodes,
         partition: raw.partition,
         account: raw.account,

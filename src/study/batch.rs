@@ -155,6 +155,12 @@ pub fn no_exit_code(end: &JobEnd) -> String {
     )
 }
 
+/// Whether jobs submitted from `dir` await collection (`--resume` then continues even
+/// before any row was written).
+pub fn has_submitted(dir: &Path) -> bool {
+    !read_state(dir).is_empty()
+}
+
 fn read_state(dir: &Path) -> BTreeMap<String, String> {
     std::fs::read_to_string(dir.join(STATE))
         .ok()
@@ -172,12 +178,15 @@ fn write_state(dir: &Path, state: &BTreeMap<String, String>) -> anyhow::Result<(
 
 /// A child that cancels the jobs in `dir/ids` when collide is interrupted (the
 /// interrupt handler signals every child's group) and ends on its own once `watching`
-/// is removed; a hard kill of collide ends it without cancelling anything.
+/// is removed or collide is gone: a hard kill of collide cancels nothing.
 fn watch_for_interrupt(dir: &Path) -> std::thread::JoinHandle<()> {
     let dir: PathBuf = dir.to_owned();
     std::thread::spawn(move || {
-        let script = "trap 'ids=$(cat ids); [ -n \"$ids\" ] && scancel $ids; exit 0' INT\n\
-                      while [ -e watching ]; do sleep 0.2; done";
+        // SIGTERM (sent when collide dies, however) is ignored so that an interrupt's
+        // scancel finishes; the loop ends when collide is gone or done.
+        let script = "trap '' TERM\n\
+                      trap 'ids=$(cat ids); [ -n \"$ids\" ] && scancel $ids; exit 0' INT\n\
+                      while [ -e watching ] && kill -0 $PPID 2>/dev/null; do sleep 0.2; done";
         let mut command = Command::new("bash");
         command.arg("-c").arg(script).current_dir(&dir);
         let _ = run_with_timeout(command, Duration::from_secs(365 * 86_400));

@@ -163,7 +163,11 @@ pub fn run_study(
     let identities: Vec<RunIdentity> = wanted.iter().map(|(_, _, id)| id.clone()).collect();
     let (results, rows) = match options.resume {
         false => (new_results_path(&dir, &environment), Vec::new()),
-        true => resumed(&dir, &build_id, &identities, &environment, &note)?,
+        // Jobs submitted before any row was written are resumed too.
+        true if !site.is_batch() || !batch::has_submitted(&dir.join(JOBS)) || has_rows(&dir)? => {
+            resumed(&dir, &build_id, &identities, &environment, &note)?
+        }
+        true => (new_results_path(&dir, &environment), Vec::new()),
     };
     let done: BTreeSet<RunIdentity> = rows.iter().map(RunIdentity::of).collect();
     let todo: Vec<(u32, usize)> = wanted
@@ -187,6 +191,14 @@ pub fn run_study(
         true => sitting.run_batch(&todo, rows, options, &site, &note),
         false => sitting.run(&todo, rows, options, quiet, &note),
     }
+}
+
+/// The folder of a study's batch jobs, in its results folder.
+const JOBS: &str = "jobs";
+
+/// Whether the study folder `dir` holds a results file.
+fn has_rows(dir: &Path) -> anyhow::Result<bool> {
+    Ok(!records::files_in(dir)?.is_empty())
 }
 
 /// The site `system` names, once every configuration's layout fits it (or insists).
@@ -314,6 +326,19 @@ impl Sitting<'_> {
             }
         }
         progress.finish_and_clear();
+        self.finish(todo, rows, kept, (measured, failed), calibrations)
+    }
+
+    /// The study's outcome once every run of `todo` has its row in `rows` (`kept` of
+    /// them from before): the load at the end recorded in the rows measured now.
+    fn finish(
+        &self,
+        todo: &[(u32, usize)],
+        mut rows: Vec<Record>,
+        kept: usize,
+        (measured, failed): (usize, usize),
+        calibrations: Vec<Calibration>,
+    ) -> anyhow::Result<StudyOutcome> {
         if !todo.is_empty() {
             record_load_at_end(&self.results, &mut rows, kept)?;
         }
@@ -394,7 +419,7 @@ impl Sitting<'_> {
         note(&self.announcement());
         let workdir = std::env::current_dir().context("cannot read the working folder")?;
         let folder = self.results.parent().unwrap_or(Path::new("."));
-        let dir = workdir.join(folder).join("jobs");
+        let dir = workdir.join(folder).join(JOBS);
         let mut site = site.clone();
         // Without a limit of its own, a job gets the study's timeout, in whole minutes.
         let minutes = self.study.timeout.as_secs().div_ceil(60).max(1);
@@ -460,16 +485,7 @@ impl Sitting<'_> {
             Ok(())
         };
         batch::run_jobs(&dir, &jobs, &mut collect, note)?;
-        if !todo.is_empty() {
-            record_load_at_end(&self.results, &mut rows, kept)?;
-        }
-        Ok(StudyOutcome {
-            results: self.results.clone(),
-            measured,
-            failed,
-            kept,
-            calibrations: Vec::new(),
-        })
+        self.finish(todo, rows, kept, (measured, failed), Vec::new())
     }
 }
 
