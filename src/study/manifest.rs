@@ -907,6 +907,44 @@ mod tests {
     }
 
     #[test]
+    fn placements_spread_mpi_ranks_over_nodes_and_refuse_threads_per_rank() {
+        let placed = study("[backends]\nserial = true\nmpi = [4]\n[placement]\nnodes = [1, 2]\n");
+        let got: Vec<(String, usize, usize)> = placed
+            .configurations
+            .iter()
+            .map(|c| (c.backend.name().to_owned(), c.workers, c.nodes))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                ("serial".into(), 1, 1),
+                ("mpi".into(), 4, 1),
+                ("mpi".into(), 4, 2)
+            ]
+        );
+        // One node keeps the key of studies written before placements.
+        assert!(placed.configurations[1].key().ends_with("workers=4"));
+        assert!(
+            placed.configurations[2]
+                .key()
+                .ends_with("workers=4;nodes=2")
+        );
+        let args = placed.configurations[2].simulate_args();
+        assert!(args.windows(2).any(|w| w == ["--nodes", "2"]), "{args:?}");
+        for (bad, says) in [
+            ("nodes = [3]", "does not divide the 4 ranks"),
+            ("threads = [2]", "not built yet"),
+            ("nodes = [0]", "at least 1"),
+        ] {
+            let text = format!("name = \"m\"\n[backends]\nmpi = [4]\n[placement]\n{bad}\n{INLINE}");
+            let err = parse(Path::new("m.toml"), &text, &MACHINE)
+                .unwrap_err()
+                .to_string();
+            assert!(err.starts_with("m.toml:4: ") && err.contains(says), "{err}");
+        }
+    }
+
+    #[test]
     fn weak_scaling_multiplies_n_by_the_workers() {
         let weak = study("scaling = \"weak\"\n[backends]\nserial = true\nrayon = [2, 4]\n");
         let n: Vec<Option<i64>> = weak.configurations.iter().map(|c| c.overrides.n).collect();
