@@ -1,6 +1,6 @@
 //! Pure statistics: the median (the tables, the accuracy analysis and the timing check
-//! all summarise repetitions by it), seeded bootstrap confidence intervals of the ratio
-//! of two medians and of the median of paired ratios, and the timing check's verdict as a pure function of that interval and a noise
+//! all summarise repetitions by it), seeded bootstrap confidence intervals of a median,
+//! of the ratio of two medians and of the median of paired ratios, and the timing check's verdict as a pure function of that interval and a noise
 //! threshold (criterion.rs' `compare_to_threshold`). No I/O and no clock: the same
 //! numbers give the same answer. The statistics of a run's observables as a time series
 //! (equilibration cut, blocked errors, replicas) are in [`series`], applied to a run's
@@ -73,13 +73,11 @@ pub const RESAMPLES: usize = 10_000;
 pub fn ratio_of_medians(new: &[f64], old: &[f64], confidence: f64, seed: u64) -> Interval {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let mut scratch = Vec::new();
-    let mut resampled_median = |values: &[f64], rng: &mut Xoshiro256PlusPlus| {
-        scratch.clear();
-        scratch.extend((0..values.len()).map(|_| values[rng.random_range(0..values.len())]));
-        median(&mut scratch)
-    };
     let mut ratios: Vec<f64> = (0..RESAMPLES)
-        .map(|_| resampled_median(new, &mut rng) / resampled_median(old, &mut rng))
+        .map(|_| {
+            resampled_median(new, &mut rng, &mut scratch)
+                / resampled_median(old, &mut rng, &mut scratch)
+        })
         .collect();
     let point = median(&mut new.to_vec()) / median(&mut old.to_vec());
     central_interval(&mut ratios, confidence, point)
@@ -94,16 +92,27 @@ pub fn ratio_of_medians(new: &[f64], old: &[f64], confidence: f64, seed: u64) ->
 pub fn paired_ratio(a: &[f64], b: &[f64], confidence: f64, seed: u64) -> Interval {
     assert_eq!(a.len(), b.len(), "paired samples of equal length");
     let ratios: Vec<f64> = a.iter().zip(b).map(|(a, b)| b / a).collect();
+    median_interval(&ratios, confidence, seed)
+}
+
+/// The median of a non-empty sample (run times) with its central `confidence` interval
+/// from [`RESAMPLES`] bootstrap resamples, drawn with the RNG seeded by `seed`. With few
+/// values the interval is wide, and it is never narrower than the values allow: one
+/// value is its own interval.
+pub fn median_interval(values: &[f64], confidence: f64, seed: u64) -> Interval {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let mut scratch = Vec::with_capacity(ratios.len());
+    let mut scratch = Vec::with_capacity(values.len());
     let mut medians: Vec<f64> = (0..RESAMPLES)
-        .map(|_| {
-            scratch.clear();
-            scratch.extend((0..ratios.len()).map(|_| ratios[rng.random_range(0..ratios.len())]));
-            median(&mut scratch)
-        })
+        .map(|_| resampled_median(values, &mut rng, &mut scratch))
         .collect();
-    central_interval(&mut medians, confidence, median(&mut ratios.clone()))
+    central_interval(&mut medians, confidence, median(&mut values.to_vec()))
+}
+
+/// The median of one bootstrap resample of `values` (drawn into `scratch`).
+fn resampled_median(values: &[f64], rng: &mut Xoshiro256PlusPlus, scratch: &mut Vec<f64>) -> f64 {
+    scratch.clear();
+    scratch.extend((0..values.len()).map(|_| values[rng.random_range(0..values.len())]));
+    median(scratch)
 }
 
 /// The central `confidence` interval of bootstrap estimates around `point`.
@@ -210,6 +219,24 @@ mod tests {
             verdict(&paired_ratio(&A, &faster, 0.95, 5), 0.03),
             Verdict::Improved
         );
+    }
+
+    #[test]
+    fn a_median_interval_holds_the_median_and_narrows_with_more_runs() {
+        let few = median_interval(&A[..3], 0.95, 2);
+        assert_eq!(few.point, 1.00);
+        assert!(few.lower <= 0.98 && few.upper >= 1.03, "{few:?}");
+        let many = median_interval(&A, 0.95, 2);
+        assert!(
+            many.lower <= many.point && many.point <= many.upper,
+            "{many:?}"
+        );
+        assert!(
+            many.upper - many.lower < few.upper - few.lower,
+            "{many:?} {few:?}"
+        );
+        assert_eq!(median_interval(&[0.5], 0.95, 2).lower, 0.5);
+        assert_eq!(many, median_interval(&A, 0.95, 2));
     }
 
     #[test]

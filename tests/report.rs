@@ -89,8 +89,6 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         collision_rate_g: None,
         temperature_se: None,
         temperature_g: None,
-        mean_overlap: Some(0.02),
-        energy_relative_error: Some(0.0),
         z_reference: None,
         z_reference_se: None,
         z_reference_source: None,
@@ -98,6 +96,8 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         missed_collision_fraction: None,
         collapse_guard_fired: None,
         collapse_tc: None,
+        mean_overlap: Some(0.02),
+        energy_relative_error: Some(0.0),
         collapse_time: None,
         time_reached: None,
         tc: None,
@@ -274,9 +274,10 @@ fn speedups_efficiencies_and_warnings_are_computed_from_the_medians() {
         "{text}"
     );
     // What the busiest MPI rank sent per step beside its timings (4.5 messages and 2 KiB
-    // to each other rank); nothing for the other backends.
+    // to each other rank); nothing for the other backends. Its Karp–Flatt, 1.235, lies
+    // outside [0, 1]: not shown.
     assert!(
-        text.contains("| mpi | 4 | 0.85 | 21% | 1.235 | 33333 | 13.5 | 6.0 |"),
+        text.contains("| mpi | 4 | 0.85 | 21% | — | 33333 | 13.5 | 6.0 |"),
         "{text}"
     );
     assert!(
@@ -318,6 +319,75 @@ fn speedups_efficiencies_and_warnings_are_computed_from_the_medians() {
 
 #[test]
 fn render_draws_the_disks_as_a_png_and_the_run_as_a_gif() {
+/// Every serial fraction a report prints ("f = …" of an Amdahl fit, a Karp–Flatt
+/// column), as numbers.
+fn serial_fractions(text: &str) -> Vec<f64> {
+    let fits = text.split("f = ").skip(1).map(|rest| {
+        let number: String = rest
+            .chars()
+            .take_while(|c| c.is_ascii_digit() || *c == '.' || *c == '-')
+            .collect();
+        number.parse::<f64>().unwrap()
+    });
+    let karp_flatt = text
+        .lines()
+        .filter(|line| line.starts_with("| rayon |") || line.starts_with("| mpi |"))
+        .filter_map(|line| line.split('|').nth(5)?.trim().parse::<f64>().ok());
+    fits.chain(karp_flatt).collect()
+}
+
+#[test]
+fn no_report_prints_a_serial_fraction_outside_zero_to_one_or_from_two_worker_counts() {
+    // Rayon and MPI at 1, 2, 4: fits with f within [0, 1], with their residuals.
+    let text = markdown(&records());
+    let fractions = serial_fractions(&text);
+    assert!(!fractions.is_empty(), "{text}");
+    assert!(
+        fractions.iter().all(|f| (0.0..=1.0).contains(f)),
+        "{fractions:?}\n{text}"
+    );
+    assert!(text.contains("residuals 1: "), "{text}");
+    // MPI at 4 three times slower than at 1: the least-squares f exceeds 1, not shown.
+    let mut slower = records();
+    for record in slower
+        .iter_mut()
+        .filter(|r| r.backend == "mpi" && r.workers == 4)
+    {
+        record.wall_s *= 3.0;
+    }
+    let text = markdown(&slower);
+    let fractions = serial_fractions(&text);
+    assert!(
+        fractions.iter().all(|f| (0.0..=1.0).contains(f)),
+        "{fractions:?}\n{text}"
+    );
+    assert!(
+        text.contains("mpi: the least-squares serial fraction is"),
+        "{text}"
+    );
+    // Only 1 and 2 workers: no serial fraction at all, and a sentence saying why.
+    let two: Vec<Record> = records().into_iter().filter(|r| r.workers < 4).collect();
+    let text = markdown(&two);
+    assert_eq!(serial_fractions(&text), Vec::<f64>::new(), "{text}");
+    assert!(text.contains("2 worker count(s), fewer than 3"), "{text}");
+}
+
+#[test]
+fn runs_under_ten_milliseconds_are_flagged_and_medians_carry_an_interval() {
+    let text = markdown(&records());
+    // Serial: median 0.0102 of 0.0100, 0.0102, 0.0110, inside its bootstrap interval.
+    assert!(
+        text.contains("| 0.0102 [0.0100, 0.0110] (0.0100–0.0110, 3 runs)"),
+        "{text}"
+    );
+    // Rayon at 2 takes 5.6 ms: too short to time well.
+    assert!(
+        text.contains("0.0056 [0.0055, 0.0060] (0.0055–0.0060, 3 runs) ⏱"),
+        "{text}"
+    );
+    assert!(text.contains("run more steps"), "{text}");
+}
+
     use image::AnimationDecoder;
 
     let dir = tempfile::tempdir().unwrap();

@@ -1,6 +1,8 @@
-//! Scaling analysis of a study's records: medians and spreads per configuration,
-//! speedup, parallel efficiency, the Karp–Flatt serial fraction and an Amdahl fit.
-//! Pure: records in, numbers out.
+//! Scaling analysis of a study's records: medians with seeded bootstrap intervals and
+//! spreads per configuration, speedup, parallel efficiency, and the Karp–Flatt serial
+//! fraction and an Amdahl fit where they mean something (at least
+//! [`MIN_WORKER_COUNTS`] worker counts, a serial fraction within [0, 1]). Pure: records
+//! in, numbers out.
 
 use std::collections::BTreeMap;
 
@@ -9,6 +11,7 @@ use polars::prelude::{
 };
 
 use crate::run::backend_kind::BackendKind;
+use crate::stats::median_interval;
 use crate::study::manifest::Scaling;
 use crate::study::records::{self, Record, STATUS_OK};
 
@@ -18,6 +21,9 @@ pub struct Point {
     pub workers: u64,
     pub reps: usize,
     pub median_s: f64,
+    /// The 95% bootstrap interval of the median ([`TIMING_CONFIDENCE`], seeded: the same
+    /// records give the same interval).
+    pub median_ci_s: [f64; 2],
     pub min_s: f64,
     pub max_s: f64,
     /// Median steps per second.
@@ -35,18 +41,71 @@ pub struct Point {
     pub speedup: f64,
     /// Strong scaling: speedup / p. Weak scaling: T(1, N₀) / T(p, p·N₀).
     pub efficiency: f64,
-    /// Karp–Flatt e(p) = (1/S − 1/p)/(1 − 1/p); undefined (NaN) at p = 1 and for weak
-    /// scaling.
+    /// Karp–Flatt e(p) = (1/S − 1/p)/(1 − 1/p); NaN at p = 1, for weak scaling, where
+    /// the backend has fewer than [`MIN_WORKER_COUNTS`] worker counts, and where it falls
+    /// outside [0, 1] (then the model does not describe the times).
     pub karp_flatt: f64,
 }
 
+impl Point {
+    /// A median under [`TOO_SHORT_S`] of stepping: timer resolution, start-up effects and
+    /// the scheduler weigh on it (flagged, with a suggestion to run more steps).
+    pub fn too_short(&self) -> bool {
+        self.median_s < TOO_SHORT_S
+    }
+}
+
+/// Runs whose median stepping time is under this many seconds are flagged.
+pub const TOO_SHORT_S: f64 = 0.01;
+
+/// Confidence of the median's bootstrap interval.
+pub const TIMING_CONFIDENCE: f64 = 0.95;
+
+/// Seed of the median's bootstrap interval.
+pub const TIMING_SEED: u64 = 0x7469_6d65;
+
+/// Fewest distinct worker counts from which a serial fraction is shown: two points fit
+/// any two-parameter law exactly (R² = 1 says nothing).
+pub const MIN_WORKER_COUNTS: usize = 3;
+
 /// Amdahl's law T(p) = T₁·(f + (1 − f)/p), fitted by least squares as T = a + b/p.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct AmdahlFit {
-    /// Serial fraction f = a/(a + b).
+    /// Serial fraction f = a/(a + b), within [0, 1].
     pub serial_fraction: f64,
     /// Coefficient of determination of the fit on the median times.
     pub r_squared: f64,
+    /// (T − T_fit)/T_fit of each point, by worker count.
+    pub residuals: Vec<(u64, f64)>,
+}
+
+/// Why a backend's serial fraction is not shown.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum NoFit {
+    /// Weak scaling: Amdahl's law and Karp–Flatt describe strong scaling.
+    Weak,
+    /// Fewer than [`MIN_WORKER_COUNTS`] worker counts.
+    FewWorkerCounts(usize),
+    /// The least-squares serial fraction fell outside [0, 1] (or was undefined): the
+    /// times do not follow the law (oversubscription, communication that grows with p).
+    OutsideUnitInterval(f64),
+}
+
+impl NoFit {
+    /// Why not, as a sentence for the report.
+    pub fn reason(&self) -> String {
+        match self {
+            NoFit::Weak => "weak scaling (Amdahl's law describes strong scaling)".to_owned(),
+            NoFit::FewWorkerCounts(counts) => format!(
+                "{counts} worker count(s), fewer than {MIN_WORKER_COUNTS}: two points fit any \
+                 two-parameter law exactly"
+            ),
+            NoFit::OutsideUnitInterval(f) => format!(
+                "the least-squares serial fraction is {f:.3}, outside [0, 1]: Amdahl's law does \
+                 not describe these times"
+            ),
+        }
+    }
 }
 
 /// What a backend's speedups are measured against.
@@ -66,8 +125,8 @@ pub struct BackendScaling {
     pub baseline: Baseline,
     /// By worker count.
     pub points: Vec<Point>,
-    /// Strong scaling with at least two worker counts.
-    pub amdahl: Option<AmdahlFit>,
+    /// The Amdahl fit, or why it is not shown.
+    pub amdahl: Result<AmdahlFit, NoFit>,
 }
 
 /// One physical setup (same scene, n, steps, dt, packing, seed, broad phase) under every
@@ -167,7 +226,7 @@ pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {
                 backend,
                 baseline: Baseline::Missing,
                 points: vec![point],
-                amdahl: None,
+                amdahl: Err(NoFit::FewWorkerCounts(0)),
             }),
         }
     }
@@ -203,6 +262,7 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Poi
         ])
         .agg([
             col("wall_s").median().alias("median_s"),
+            col("wall_s").alias("times"),
             col("wall_s").min().alias("min_s"),
             col("wall_s").max().alias("max_s"),
             len().cast(DataType::UInt64).alias("reps"),
@@ -219,6 +279,7 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Poi
     let backend = table.column("backend")?.str()?;
     let workers = table.column("workers")?.u64()?;
     let median_s = table.column("median_s")?.f64()?;
+    let times = table.column("times")?.list()?;
     let min_s = table.column("min_s")?.f64()?;
     let max_s = table.column("max_s")?.f64()?;
     let reps = table.column("reps")?.u64()?;
@@ -227,12 +288,24 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Poi
     let oversubscribed = table.column("oversubscribed")?.bool()?;
     let messages_per_step = table.column("messages_per_step")?.f64()?;
     let bytes_per_step = table.column("bytes_per_step")?.f64()?;
-    Ok((0..table.height())
+    (0..table.height())
         .map(|i| {
+            let times: Vec<f64> = match times.get_as_series(i) {
+                Some(values) => values.f64()?.into_no_null_iter().collect(),
+                None => Vec::new(),
+            };
+            let median_ci_s = match times.is_empty() {
+                true => [f64::NAN; 2],
+                false => {
+                    let interval = median_interval(&times, TIMING_CONFIDENCE, TIMING_SEED);
+                    [interval.lower, interval.upper]
+                }
+            };
             let point = Point {
                 workers: workers.get(i).unwrap_or_default(),
                 reps: reps.get(i).unwrap_or_default() as usize,
                 median_s: median_s.get(i).unwrap_or(f64::NAN),
+                median_ci_s,
                 min_s: min_s.get(i).unwrap_or(f64::NAN),
                 max_s: max_s.get(i).unwrap_or(f64::NAN),
                 fps: fps.get(i).unwrap_or(f64::NAN),
@@ -245,9 +318,9 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Poi
                 karp_flatt: f64::NAN,
             };
             let text = |column: &StringChunked| column.get(i).unwrap_or_default().to_owned();
-            (text(series), text(backend), point)
+            Ok((text(series), text(backend), point))
         })
-        .collect())
+        .collect()
 }
 
 /// Per series, the most distinct `state_hash`es of any one physical setup in it.
@@ -317,18 +390,34 @@ fn derive_scaling(setup: &mut Setup) {
             }
         }
         backend.amdahl = if weak {
-            None
+            Err(NoFit::Weak)
         } else {
             amdahl_fit(&backend.points)
         };
+        // Karp–Flatt is a serial fraction too: shown under the same conditions.
+        let counts = distinct_worker_counts(&backend.points);
+        for point in &mut backend.points {
+            if counts < MIN_WORKER_COUNTS || !(0.0..=1.0).contains(&point.karp_flatt) {
+                point.karp_flatt = f64::NAN;
+            }
+        }
     }
 }
 
-/// Least squares of the medians on T = a + b·(1/p); f = a/(a + b). None with fewer than
-/// two worker counts or a degenerate fit.
-pub fn amdahl_fit(points: &[Point]) -> Option<AmdahlFit> {
-    if points.len() < 2 {
-        return None;
+fn distinct_worker_counts(points: &[Point]) -> usize {
+    let mut workers: Vec<u64> = points.iter().map(|p| p.workers).collect();
+    workers.sort_unstable();
+    workers.dedup();
+    workers.len()
+}
+
+/// Least squares of the medians on T = a + b·(1/p); f = a/(a + b), with each point's
+/// relative residual. Not shown ([`NoFit`]) with fewer than [`MIN_WORKER_COUNTS`]
+/// distinct worker counts or a serial fraction outside [0, 1].
+pub fn amdahl_fit(points: &[Point]) -> Result<AmdahlFit, NoFit> {
+    let counts = distinct_worker_counts(points);
+    if counts < MIN_WORKER_COUNTS {
+        return Err(NoFit::FewWorkerCounts(counts));
     }
     let xs: Vec<f64> = points.iter().map(|p| 1.0 / p.workers as f64).collect();
     let ys: Vec<f64> = points.iter().map(|p| p.median_s).collect();
@@ -341,7 +430,7 @@ pub fn amdahl_fit(points: &[Point]) -> Option<AmdahlFit> {
         .map(|(x, y)| (x - mean_x) * (y - mean_y))
         .sum();
     if sxx == 0.0 {
-        return None;
+        return Err(NoFit::FewWorkerCounts(1));
     }
     let b = sxy / sxx;
     let a = mean_y - b * mean_x;
@@ -353,9 +442,18 @@ pub fn amdahl_fit(points: &[Point]) -> Option<AmdahlFit> {
         .sum();
     let r_squared = if syy > 0.0 { 1.0 - residual / syy } else { 1.0 };
     let serial_fraction = a / (a + b);
-    serial_fraction.is_finite().then_some(AmdahlFit {
+    if !(0.0..=1.0).contains(&serial_fraction) {
+        return Err(NoFit::OutsideUnitInterval(serial_fraction));
+    }
+    let residuals = points
+        .iter()
+        .zip(xs.iter().zip(&ys))
+        .map(|(point, (x, y))| (point.workers, y / (a + b * x) - 1.0))
+        .collect();
+    Ok(AmdahlFit {
         serial_fraction,
         r_squared,
+        residuals,
     })
 }
 
@@ -368,6 +466,7 @@ mod tests {
             workers,
             reps: 1,
             median_s,
+            median_ci_s: [median_s; 2],
             min_s: median_s,
             max_s: median_s,
             fps: 1.0 / median_s,
@@ -391,6 +490,34 @@ mod tests {
         let fit = amdahl_fit(&points).unwrap();
         assert!((fit.serial_fraction - 0.2).abs() < 1e-12, "{fit:?}");
         assert!((fit.r_squared - 1.0).abs() < 1e-12);
-        assert!(amdahl_fit(&points[..1]).is_none());
+        assert!(
+            fit.residuals.iter().all(|(_, r)| r.abs() < 1e-12),
+            "{fit:?}"
+        );
+        // Two worker counts fit any law exactly: no serial fraction from them.
+        assert_eq!(amdahl_fit(&points[..2]), Err(NoFit::FewWorkerCounts(2)));
+        assert_eq!(amdahl_fit(&points[..1]), Err(NoFit::FewWorkerCounts(1)));
+    }
+
+    #[test]
+    fn a_serial_fraction_outside_zero_to_one_is_not_shown() {
+        // Slower with more workers (oversubscribed): T grows with p, f > 1.
+        let points: Vec<Point> = [1, 2, 4]
+            .iter()
+            .map(|&p| point(p, 1.0 + 0.1 * p as f64))
+            .collect();
+        match amdahl_fit(&points) {
+            Err(NoFit::OutsideUnitInterval(f)) => assert!(f > 1.0, "{f}"),
+            other => panic!("{other:?}"),
+        }
+        // Faster than ideal (superlinear): f < 0.
+        let points: Vec<Point> = [1, 2, 4]
+            .iter()
+            .map(|&p| point(p, 1.0 / (p * p) as f64))
+            .collect();
+        assert!(matches!(
+            amdahl_fit(&points),
+            Err(NoFit::OutsideUnitInterval(f)) if f < 0.0
+        ));
     }
 }

@@ -10,7 +10,7 @@ use crate::report::accuracy::{
     AccuracyPoint, Breakdown, CoolingCurve, FAILURE_MISSED_FRACTION, FLAG_WALL_PENETRATION,
     HAFF_BREAKDOWN, PackingGroup, method_label,
 };
-use crate::report::analysis::{Baseline, Setup};
+use crate::report::analysis::{Baseline, MIN_WORKER_COUNTS, Setup, TIMING_CONFIDENCE, TOO_SHORT_S};
 use crate::report::figures::cooling::COOLING_FILE;
 use crate::report::figures::history::{HISTORY_FILE, checks};
 use crate::report::figures::scaling::Figure;
@@ -320,12 +320,15 @@ fn seconds_table(out: &mut String, setup: &Setup) {
                 Some(point) => {
                     let _ = write!(
                         out,
-                        " {:.4} ({:.4}–{:.4}, {} runs){} |",
+                        " {:.4} [{:.4}, {:.4}] ({:.4}–{:.4}, {} runs){}{} |",
                         point.median_s,
+                        point.median_ci_s[0],
+                        point.median_ci_s[1],
                         point.min_s,
                         point.max_s,
                         point.reps,
-                        if point.oversubscribed { " ⚠" } else { "" }
+                        if point.oversubscribed { " ⚠" } else { "" },
+                        if point.too_short() { " ⏱" } else { "" }
                     );
                 }
                 None => {
@@ -337,7 +340,11 @@ fn seconds_table(out: &mut String, setup: &Setup) {
     }
     let _ = writeln!(
         out,
-        "\nMedian of the repetitions, with their min–max; ⚠ marks oversubscribed runs.\n"
+        "\nMedian of the repetitions with its {:.0}% bootstrap interval (seeded) in brackets, \
+         and their min–max; ⚠ marks oversubscribed runs, ⏱ a median under {:.0} ms of \
+         stepping, too short to time well: run more steps.\n",
+        100.0 * TIMING_CONFIDENCE,
+        1e3 * TOO_SHORT_S
     );
 }
 
@@ -453,10 +460,18 @@ fn speedup_notes(out: &mut String, setup: &Setup, sent: bool) {
         .backends
         .iter()
         .filter_map(|b| {
-            b.amdahl.map(|fit| {
+            b.amdahl.as_ref().ok().map(|fit| {
+                let residuals: Vec<String> = fit
+                    .residuals
+                    .iter()
+                    .map(|(p, r)| format!("{p}: {:+.1}%", 100.0 * r))
+                    .collect();
                 format!(
-                    "{}: f = {:.3} (R² = {:.3})",
-                    b.backend, fit.serial_fraction, fit.r_squared
+                    "{}: f = {:.3} (R² = {:.3}; residuals {})",
+                    b.backend,
+                    fit.serial_fraction,
+                    fit.r_squared,
+                    residuals.join(", ")
                 )
             })
         })
@@ -465,9 +480,30 @@ fn speedup_notes(out: &mut String, setup: &Setup, sent: bool) {
         let _ = writeln!(
             out,
             "Amdahl fit T(p) = T₁·(f + (1 − f)/p), least squares on the medians: {}. An R² \
-             far below 1 means Amdahl's law does not describe these times (oversubscription, \
-             communication that grows with p).\n",
+             far below 1, or residuals beyond the runs' spread, means Amdahl's law does not \
+             describe these times (oversubscription, communication that grows with p).\n",
             fits.join("; ")
+        );
+    }
+    // Where a fit could be asked for (a parallel backend at several worker counts), why not.
+    let not_shown: Vec<String> = setup
+        .backends
+        .iter()
+        .filter(|b| b.points.len() > 1)
+        .filter_map(|b| {
+            b.amdahl
+                .as_ref()
+                .err()
+                .map(|why| format!("{}: {}", b.backend, why.reason()))
+        })
+        .collect();
+    if !not_shown.is_empty() {
+        let _ = writeln!(
+            out,
+            "No serial fraction (Amdahl or Karp–Flatt) is shown for {}. Karp–Flatt e(p) is \
+             shown only for a backend with at least {MIN_WORKER_COUNTS} worker counts and where \
+             it lies within [0, 1].\n",
+            not_shown.join("; ")
         );
     }
 }

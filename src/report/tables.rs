@@ -9,9 +9,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 
-use crate::report::analysis::{self, Setup};
+use crate::report::analysis::{self, Setup, TIMING_CONFIDENCE, TIMING_SEED, TOO_SHORT_S};
 use crate::report::markdown::describe;
-use crate::stats::median;
+use crate::stats::{median, median_interval};
 use crate::study::manifest::Scaling;
 use crate::study::records::{self, Record, STATUS_OK};
 
@@ -292,23 +292,29 @@ pub fn table(records: &[Record]) -> String {
         }
         group.push(record);
     }
+    let mut any_short = false;
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "{:<9} {:>7} {:>9} {:>7} {:>12} {:>21} {:>4} {:>6}  scene",
-        "backend", "workers", "n", "steps", "median s", "min–max s", "reps", "failed"
+        "{:<9} {:>7} {:>9} {:>7} {:>12} {:>21} {:>21} {:>4} {:>6}  scene",
+        "backend", "workers", "n", "steps", "median s", "95% CI s", "min–max s", "reps", "failed"
     );
     for key in &order {
         let group = &groups[key];
         let ok: Vec<&&Record> = group.iter().filter(|r| r.status == STATUS_OK).collect();
         let mut times: Vec<f64> = ok.iter().map(|r| r.wall_s).collect();
         let first = group[0];
-        let (median_s, spread) = if times.is_empty() {
-            ("—".to_owned(), "—".to_owned())
+        let (median_s, interval, spread) = if times.is_empty() {
+            ("—".to_owned(), "—".to_owned(), "—".to_owned())
         } else {
             let median_s = median(&mut times);
+            let ci = median_interval(&times, TIMING_CONFIDENCE, TIMING_SEED);
+            // Under 10 ms of stepping: too short to time well.
+            any_short |= median_s < TOO_SHORT_S;
+            let short = if median_s < TOO_SHORT_S { " ⏱" } else { "" };
             (
-                format!("{median_s:.4}"),
+                format!("{median_s:.4}{short}"),
+                format!("{:.4}–{:.4}", ci.lower, ci.upper),
                 format!("{:.4}–{:.4}", times[0], times[times.len() - 1]),
             )
         };
@@ -320,16 +326,24 @@ pub fn table(records: &[Record]) -> String {
         };
         let _ = writeln!(
             out,
-            "{:<9} {:>7} {:>9} {:>7} {:>12} {:>21} {:>4} {:>6}  {}{oversubscribed}",
+            "{:<9} {:>7} {:>9} {:>7} {:>12} {:>21} {:>21} {:>4} {:>6}  {}{oversubscribed}",
             first.backend,
             first.workers,
             shown.n,
             shown.steps,
             median_s,
+            interval,
             spread,
             ok.len(),
             group.len() - ok.len(),
             first.scene
+        );
+    }
+    if any_short {
+        let _ = writeln!(
+            out,
+            "⏱ a median under {:.0} ms of stepping: too short to time well; run more steps.",
+            1e3 * TOO_SHORT_S
         );
     }
     let _ = write!(out, "{}", hash_agreement(records));
