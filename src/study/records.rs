@@ -16,7 +16,7 @@ use crate::study::environment::Environment;
 use crate::study::manifest::{PLACEMENT_KEYS, Scaling};
 use crate::system::output::write_atomically;
 
-pub const SCHEMA_VERSION: u32 = 11;
+pub const SCHEMA_VERSION: u32 = 12;
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
 const OLDEST_READABLE_VERSION: u32 = 1;
 
@@ -82,6 +82,12 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     (11, "job_id", Fill::Str("")),
     (11, "node_list", Fill::Str("")),
     (11, "queue_wait_s", Fill::F64(f64::NAN)),
+    // Version 11 averaged the observables from t = 0 without an error bar.
+    (12, "equilibration_cut_time", Fill::F64(f64::NAN)),
+    (12, "compressibility_z_se", Fill::F64(f64::NAN)),
+    (12, "compressibility_z_g", Fill::F64(f64::NAN)),
+    (12, "collision_rate_se", Fill::F64(f64::NAN)),
+    (12, "temperature_se", Fill::F64(f64::NAN)),
 ];
 
 /// What became of one run.
@@ -417,7 +423,9 @@ macro_rules! for_each_column {
                  temperature <- run, pressure <- run, compressibility_z <- run,
                  missed_collision_fraction <- run, mean_overlap <- run,
                  energy_relative_error <- run, rms_step_over_radius <- run,
-                 collapse_time <- run, tc <- run, queue_wait_s;
+                 collapse_time <- run, tc <- run, queue_wait_s,
+                 equilibration_cut_time <- run, compressibility_z_se <- run,
+                 compressibility_z_g <- run, collision_rate_se <- run, temperature_se <- run;
             bool: oversubscribed <- run, git_dirty;
             opt_u64: seed <- run, missed_collisions <- run, collapse_guard_fired <- run,
                  usable_cpus
