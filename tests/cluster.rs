@@ -299,6 +299,16 @@ fn batch_jobs_that_complete_time_out_are_cancelled_or_lost_each_leave_their_row(
         ]
     );
     assert_eq!(rows[0].queue_wait_s, 3.0);
+    // Its one rank said where it ran, before the program's own output.
+    let jobs = out.join("batch").join("jobs");
+    let err = std::fs::read_dir(&jobs)
+        .unwrap()
+        .map(|entry| entry.unwrap().path())
+        .filter(|path| path.extension().is_some_and(|ext| ext == "err"))
+        .map(|path| std::fs::read_to_string(path).unwrap())
+        .find(|text| text.contains("collide-rank: "))
+        .expect("a rank reported its CPUs");
+    assert!(err.starts_with("collide-rank: 0 "), "{err}");
     assert!(!rows[0].state_hash.is_empty());
     assert!(rows[1].error.contains("timed out"), "{}", rows[1].error);
     assert!(rows[2].error.contains("cancelled"), "{}", rows[2].error);

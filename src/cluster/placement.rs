@@ -76,9 +76,124 @@ impl std::fmt::Display for Layout {
     }
 }
 
+/// Where one rank of a batch job ran: the line it printed first (`collide-rank: RANK
+/// HOST CPUS THREADS`, CPUs as the kernel lists them, e.g. `0-3,8`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RankCpus {
+    pub rank: usize,
+    pub host: String,
+    pub cpus: String,
+    pub threads: usize,
+}
+
+/// The ranks' lines in a job's error output, in rank order.
+pub fn rank_cpus(stderr: &str) -> Vec<RankCpus> {
+    let mut ranks: Vec<RankCpus> = stderr
+        .lines()
+        .filter_map(|line| {
+            let words: Vec<&str> = line.strip_prefix("collide-rank: ")?.split(' ').collect();
+            let [rank, host, cpus, threads] = words[..] else {
+                return None;
+            };
+            Some(RankCpus {
+                rank: rank.parse().ok()?,
+                host: host.to_owned(),
+                cpus: cpus.to_owned(),
+                threads: threads.parse().ok()?,
+            })
+        })
+        .collect();
+    ranks.sort_by_key(|r| r.rank);
+    ranks
+}
+
+/// What is wrong with where the ranks ran: ranks on one host allowed the same CPUs
+/// (one warning per host, naming them), or a rank allowed fewer CPUs than it has threads.
+pub fn mask_warnings(ranks: &[RankCpus]) -> Vec<String> {
+    let sets: Vec<Vec<usize>> = ranks.iter().map(|r| cpu_list(&r.cpus)).collect();
+    let mut warnings = Vec::new();
+    let mut hosts: Vec<&str> = ranks.iter().map(|r| r.host.as_str()).collect();
+    hosts.sort_unstable();
+    hosts.dedup();
+    for host in hosts {
+        let sharing: Vec<String> = (0..ranks.len())
+            .filter(|&i| ranks[i].host == host)
+            .filter(|&i| {
+                (0..ranks.len()).any(|j| {
+                    j != i
+                        && ranks[j].host == host
+                        && sets[i].iter().any(|cpu| sets[j].contains(cpu))
+                })
+            })
+            .map(|i| format!("{} ({})", ranks[i].rank, ranks[i].cpus))
+            .collect();
+        if !sharing.is_empty() {
+            warnings.push(format!(
+                "on {host}, ranks {} share CPUs: they take turns rather than run at once",
+                sharing.join(", ")
+            ));
+        }
+    }
+    for (rank, set) in ranks.iter().zip(&sets) {
+        if set.len() < rank.threads {
+            warnings.push(format!(
+                "rank {} on {} may run on {} CPU(s) ({}) for its {} threads",
+                rank.rank,
+                rank.host,
+                set.len(),
+                rank.cpus,
+                rank.threads
+            ));
+        }
+    }
+    warnings
+}
+
+/// The CPUs of a kernel CPU list (`0-3,8`).
+fn cpu_list(text: &str) -> Vec<usize> {
+    text.split(',')
+        .flat_map(|part| {
+            let (low, high) = part.split_once('-').unwrap_or((part, part));
+            match (low.trim().parse::<usize>(), high.trim().parse::<usize>()) {
+                (Ok(low), Ok(high)) if high >= low && high - low < 1 << 16 => low..=high,
+                _ => 1..=0,
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ranks_say_where_they_ran_and_shared_or_scarce_cpus_are_warned_of() {
+        let stderr = "collide-rank: 1 n1 2-3 2\nnoise\ncollide-rank: 0 n1 0-1 2\n\
+                      collide-rank: 2 n2 0-1 2\ncollide-rank: 3 n2 1 2\n";
+        let ranks = rank_cpus(stderr);
+        let order: Vec<(usize, &str, &str)> = ranks
+            .iter()
+            .map(|r| (r.rank, r.host.as_str(), r.cpus.as_str()))
+            .collect();
+        assert_eq!(
+            order,
+            [
+                (0, "n1", "0-1"),
+                (1, "n1", "2-3"),
+                (2, "n2", "0-1"),
+                (3, "n2", "1")
+            ]
+        );
+        assert_eq!(
+            mask_warnings(&ranks),
+            [
+                "on n2, ranks 2 (0-1), 3 (1) share CPUs: they take turns rather than run at once",
+                "rank 3 on n2 may run on 1 CPU(s) (1) for its 2 threads"
+            ]
+        );
+        assert!(mask_warnings(&ranks[..2]).is_empty());
+        assert_eq!(cpu_list("0-2,5"), [0, 1, 2, 5]);
+    }
 
     #[test]
     fn a_layout_fits_the_site_or_says_what_to_change() {

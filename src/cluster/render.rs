@@ -108,6 +108,12 @@ pub fn launch_line(site: &Site, layout: Layout) -> Line {
     Line { argv, env }
 }
 
+/// What each rank of a batch job runs before the program (`$0 "$@"`): one line on its
+/// error output with its rank, host, allowed CPUs and threads.
+const RANK_REPORT: &str = "echo \"collide-rank: ${SLURM_PROCID:-${OMPI_COMM_WORLD_RANK:-${PMI_RANK:-0}}} \
+     ${SLURMD_NODENAME:-$(hostname)} $(sed -n 's/^Cpus_allowed_list:[[:space:]]*//p' /proc/self/status) \
+     ${RAYON_NUM_THREADS:-1}\" >&2; exec \"$0\" \"$@\"";
+
 /// One batch job: its name, the folder its output and exit-code files go to (beside
 /// the script), the folder it runs in, and the program each rank runs.
 #[derive(Clone, Copy, Debug)]
@@ -213,11 +219,15 @@ pub fn job_script(site: &Site, layout: Layout, job: &Job<'_>) -> String {
     for (name, value) in &line.env {
         script.push(format!("export {name}={}", quote(value)));
     }
+    // Each rank first says where it runs (read back by `placement::rank_cpus`).
+    let report = ["bash", "-c", RANK_REPORT];
     let words: Vec<String> = line
         .argv
         .iter()
-        .chain(job.program)
-        .map(|word| quote(word))
+        .map(String::as_str)
+        .chain(report)
+        .chain(job.program.iter().map(String::as_str))
+        .map(quote)
         .collect();
     script.push(words.join(" "));
     script.join("\n") + "\n"

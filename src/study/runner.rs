@@ -18,6 +18,7 @@ use std::time::Duration;
 use anyhow::{Context, anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::cluster::placement::{mask_warnings, rank_cpus};
 use crate::cluster::render::{Job, job_script};
 use crate::cluster::site::{LOCAL, Site};
 use crate::cluster::slurm::JobState;
@@ -472,6 +473,9 @@ impl Sitting<'_> {
             record.job_id = end.id;
             record.node_list = end.info.nodes;
             record.queue_wait_s = end.info.queue_wait_s.unwrap_or(f64::NAN);
+            for warning in mask_warnings(&rank_cpus(&end.stderr)) {
+                eprintln!("warning: {key}, job {}: {warning}", record.job_id);
+            }
             if record.status == STATUS_OK {
                 measured += 1;
             } else {
