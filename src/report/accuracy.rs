@@ -45,6 +45,10 @@ pub struct AccuracyPoint {
     /// Fraction of the radius; NaN in records older than schema version 6.
     pub max_wall_penetration: f64,
     pub compressibility_z: f64,
+    /// Z's standard error after the equilibration cut (blocking; median over the
+    /// repetitions); NaN where the runs did not equilibrate and in records older than
+    /// schema version 12.
+    pub z_se: f64,
     pub collision_rate: f64,
     /// (Z − Z_ref)/Z_ref against the event reference at the same packing; NaN without one.
     pub z_error: f64,
@@ -175,6 +179,7 @@ fn summarise(method: &str, runs: &[&Record]) -> AccuracyPoint {
         max_overlap: med(|r| r.max_overlap),
         max_wall_penetration: med(|r| r.max_wall_penetration),
         compressibility_z: med(|r| r.compressibility_z),
+        z_se: med(|r| r.compressibility_z_se),
         collision_rate: med(|r| r.collision_rate),
         z_error: f64::NAN,
         rate_error: f64::NAN,

@@ -601,7 +601,7 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
         let _ = writeln!(out, "### Packing {:.2}\n", group.packing);
         let _ = writeln!(
             out,
-            "| method | dt | v_rms·dt/r | wall s | sim time / s | particle-steps/s | missed fraction | max overlap | max wall penetration | Z | Z error | ω | ω error |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+            "| method | dt | v_rms·dt/r | wall s | sim time / s | particle-steps/s | missed fraction | max overlap | max wall penetration | Z ± SE | Z error | ω | ω error |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
         );
         if let Some(reference) = &group.reference {
             accuracy_row(out, reference, true);
@@ -664,13 +664,17 @@ fn accuracy_row(out: &mut String, p: &AccuracyPoint, is_reference: bool) {
             finite_or_dash(value, format!("{:+.2}%", 100.0 * value))
         }
     };
+    // Z with its error bar where the runs equilibrated.
+    let z = match p.z_se {
+        se if se.is_finite() => format!("{:.4} ± {se:.4}", p.compressibility_z),
+        _ => format!("{:.4}", p.compressibility_z),
+    };
     let _ = writeln!(
         out,
-        "| {method} | {dt} | {step} | {:.4} | {:.1} | {:.3e} | {missed} | {overlap} | {wall} | {:.4} | {} | {:.4} | {} |",
+        "| {method} | {dt} | {step} | {:.4} | {:.1} | {:.3e} | {missed} | {overlap} | {wall} | {z} | {} | {:.4} | {} |",
         p.wall_s,
         p.sim_time_per_s,
         p.particle_steps_per_s,
-        p.compressibility_z,
         error(p.z_error),
         p.collision_rate,
         error(p.rate_error),
