@@ -136,6 +136,42 @@ pub fn output_file(dir: &Path, name: &str) -> std::path::PathBuf {
 
 /// The job script for `job` with `layout` on `site` (whose scheduler is a batch one).
 pub fn job_script(site: &Site, layout: Layout, job: &Job<'_>) -> String {
+    let head = scheduler_directives(site, layout, job);
+    let line = launch_line(site, layout);
+    let exit = quote(&exit_file(job.dir, job.name).display().to_string());
+    let mut script = vec!["#!/bin/bash".to_owned()];
+    script.extend(head);
+    script.push("set -euo pipefail".into());
+    script.push(
+        "# The exit code, written on every exit (a crash, a signal, the end): the job's \
+         state alone can say COMPLETED when the ranks failed."
+            .into(),
+    );
+    script.push(format!(
+        "trap 'code=$?; echo \"$code\" > {exit}.tmp && mv {exit}.tmp {exit}' EXIT"
+    ));
+    script.push(format!("cd {}", quote(&job.workdir.display().to_string())));
+    for (name, value) in &line.env {
+        script.push(format!("export {name}={}", quote(value)));
+    }
+    // Each rank first says where it runs (read back by `placement::rank_cpus`).
+    let report = ["bash", "-c", RANK_REPORT];
+    let words: Vec<String> = line
+        .argv
+        .iter()
+        .map(String::as_str)
+        .chain(report)
+        .chain(job.program.iter().map(String::as_str))
+        .map(quote)
+        .collect();
+    script.push(words.join(" "));
+    script.join("\n") + "\n"
+}
+
+/// The scheduler's directives at the head of a job script (`#SBATCH`, `#PBS`,
+/// `#flux:`): the job's name, nodes, ranks and threads, its output files, and the
+/// site's queue, account, time limit and extra options.
+fn scheduler_directives(site: &Site, layout: Layout, job: &Job<'_>) -> Vec<String> {
     let out = output_file(job.dir, job.name).display().to_string();
     let err = job
         .dir
@@ -202,35 +238,7 @@ pub fn job_script(site: &Site, layout: Layout, job: &Job<'_>) -> String {
         }
         Scheduler::None => {}
     }
-    let line = launch_line(site, layout);
-    let exit = quote(&exit_file(job.dir, job.name).display().to_string());
-    let mut script = vec!["#!/bin/bash".to_owned()];
-    script.extend(head);
-    script.push("set -euo pipefail".into());
-    script.push(
-        "# The exit code, written on every exit (a crash, a signal, the end): the job's \
-         state alone can say COMPLETED when the ranks failed."
-            .into(),
-    );
-    script.push(format!(
-        "trap 'code=$?; echo \"$code\" > {exit}.tmp && mv {exit}.tmp {exit}' EXIT"
-    ));
-    script.push(format!("cd {}", quote(&job.workdir.display().to_string())));
-    for (name, value) in &line.env {
-        script.push(format!("export {name}={}", quote(value)));
-    }
-    // Each rank first says where it runs (read back by `placement::rank_cpus`).
-    let report = ["bash", "-c", RANK_REPORT];
-    let words: Vec<String> = line
-        .argv
-        .iter()
-        .map(String::as_str)
-        .chain(report)
-        .chain(job.program.iter().map(String::as_str))
-        .map(quote)
-        .collect();
-    script.push(words.join(" "));
-    script.join("\n") + "\n"
+    head
 }
 
 /// `HH:MM:SS` or `D-HH:MM:SS` (validated by the site) in seconds.

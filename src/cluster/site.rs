@@ -254,12 +254,9 @@ const KEYS: &str = "scheduler, launcher, launcher_path, cores_per_node, bind, ma
 
 /// Validates a site file's text; `path` names it in errors and gives the site its name.
 pub fn parse(path: &Path, text: &str) -> Result<Site, SiteError> {
-    let invalid = |offset: usize, message: String| SiteError {
-        location: format!("{}:{}", path.display(), line_of(text, offset)),
-        message,
-    };
+    let file = SiteText { path, text };
     let raw: RawSite = toml::from_str(text).map_err(|err| {
-        invalid(
+        file.invalid(
             err.span().map_or(0, |span| span.start),
             format!(
                 "{}; a site file takes {KEYS} (docs/clusters.md)",
@@ -267,100 +264,24 @@ pub fn parse(path: &Path, text: &str) -> Result<Site, SiteError> {
             ),
         )
     })?;
-    let scheduler =
-        one_of(&Scheduler::ALL, Scheduler::name, raw.scheduler.get_ref()).map_err(|names| {
-            invalid(
-                raw.scheduler.span().start,
-                format!(
-                    "`scheduler` is {:?}; give one of {names}",
-                    raw.scheduler.get_ref()
-                ),
-            )
-        })?;
-    let launcher = match &raw.launcher {
-        None => match scheduler {
-            Scheduler::Slurm => Launcher::Srun,
-            Scheduler::Flux => Launcher::Flux,
-            Scheduler::None | Scheduler::Pbs => Launcher::Mpirun,
-        },
-        Some(launcher) => {
-            one_of(&Launcher::ALL, Launcher::name, launcher.get_ref()).map_err(|names| {
-                invalid(
-                    launcher.span().start,
-                    format!(
-                        "`launcher` is {:?}; give one of {names}",
-                        launcher.get_ref()
-                    ),
-                )
-            })?
-        }
-    };
-    if let Some(needed) = launcher.needs().filter(|&needed| needed != scheduler) {
-        let offset = raw.launcher.as_ref().map_or(0, |l| l.span().start);
-        return Err(invalid(
-            offset,
-            format!(
-                "`launcher = \"{}\"` starts ranks only under `scheduler = \"{}\"`, and this site \
-                 says \"{}\"; change one of them (`mpirun` and `mpiexec` work under any)",
-                launcher.name(),
-                needed.name(),
-                scheduler.name()
-            ),
-        ));
-    }
-    let positive = |value: &Spanned<i64>, key: &str| -> Result<usize, SiteError> {
-        usize::try_from(*value.get_ref())
-            .ok()
-            .filter(|&count| count >= 1)
-            .ok_or_else(|| {
-                invalid(
-                    value.span().start,
-                    format!(
-                        "`{key}` is {}; give a whole number of at least 1",
-                        value.get_ref()
-                    ),
-                )
-            })
-    };
-    let cores_per_node = positive(&raw.cores_per_node, "cores_per_node")?;
+    let scheduler = file.choice(
+        &Scheduler::ALL,
+        Scheduler::name,
+        &raw.scheduler,
+        "scheduler",
+    )?;
+    let launcher = file.launcher(&raw, scheduler)?;
+    let cores_per_node = file.positive(&raw.cores_per_node, "cores_per_node")?;
     let bind = match &raw.bind {
         None => Bind::Cores,
-        Some(bind) => one_of(&Bind::ALL, Bind::name, bind.get_ref()).map_err(|names| {
-            invalid(
-                bind.span().start,
-                format!("`bind` is {:?}; give one of {names}", bind.get_ref()),
-            )
-        })?,
+        Some(bind) => file.choice(&Bind::ALL, Bind::name, bind, "bind")?,
     };
     let max_nodes = match &raw.max_nodes {
-        Some(value) => positive(value, "max_nodes")?,
+        Some(value) => file.positive(value, "max_nodes")?,
         None => 1,
     };
-    if let Some(limit) = &raw.time_limit {
-        if !is_time_limit(limit.get_ref()) {
-            return Err(invalid(
-                limit.span().start,
-                format!(
-                    "`time_limit` is {:?}; write it as HH:MM:SS, or D-HH:MM:SS for days",
-                    limit.get_ref()
-                ),
-            ));
-        }
-    }
-    for (key, value) in &raw.env {
-        let good = !key.is_empty()
-            && !key.starts_with(|c: char| c.is_ascii_digit())
-            && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
-        if !good || value.get_ref().contains(['\n', '\'']) {
-            return Err(invalid(
-                value.span().start,
-                format!(
-                    "`env.{key}`: a variable's name takes letters, digits and `_` (not first a \
-                     digit), and its value no newline nor `'`; rename or requote it"
-                ),
-            ));
-        }
-    }
+    file.check_time_limit(raw.time_limit.as_ref())?;
+    file.check_env(&raw.env)?;
     let mut command: Vec<String> = launcher.name().split(' ').map(str::to_owned).collect();
     if let Some(program) = raw.launcher_path {
         command[0] = program;
@@ -386,6 +307,113 @@ pub fn parse(path: &Path, text: &str) -> Result<Site, SiteError> {
             .map(|(key, value)| (key, value.into_inner()))
             .collect(),
     })
+}
+
+/// A site file's text and where it came from: what its errors point into.
+struct SiteText<'a> {
+    path: &'a Path,
+    text: &'a str,
+}
+
+impl SiteText<'_> {
+    /// An error at byte `offset` of the file, located by line.
+    fn invalid(&self, offset: usize, message: String) -> SiteError {
+        SiteError {
+            location: format!("{}:{}", self.path.display(), line_of(self.text, offset)),
+            message,
+        }
+    }
+
+    /// The item of `all` that `value` names, else an error at it listing the names.
+    fn choice<T: Copy>(
+        &self,
+        all: &[T],
+        name: fn(T) -> &'static str,
+        value: &Spanned<String>,
+        key: &str,
+    ) -> Result<T, SiteError> {
+        one_of(all, name, value.get_ref()).map_err(|names| {
+            self.invalid(
+                value.span().start,
+                format!("`{key}` is {:?}; give one of {names}", value.get_ref()),
+            )
+        })
+    }
+
+    /// The launcher the site names (else its scheduler's own), if it can start ranks
+    /// under that scheduler.
+    fn launcher(&self, raw: &RawSite, scheduler: Scheduler) -> Result<Launcher, SiteError> {
+        let launcher = match &raw.launcher {
+            None => match scheduler {
+                Scheduler::Slurm => Launcher::Srun,
+                Scheduler::Flux => Launcher::Flux,
+                Scheduler::None | Scheduler::Pbs => Launcher::Mpirun,
+            },
+            Some(launcher) => self.choice(&Launcher::ALL, Launcher::name, launcher, "launcher")?,
+        };
+        match launcher.needs().filter(|&needed| needed != scheduler) {
+            None => Ok(launcher),
+            Some(needed) => Err(self.invalid(
+                raw.launcher.as_ref().map_or(0, |l| l.span().start),
+                format!(
+                    "`launcher = \"{}\"` starts ranks only under `scheduler = \"{}\"`, and this \
+                     site says \"{}\"; change one of them (`mpirun` and `mpiexec` work under any)",
+                    launcher.name(),
+                    needed.name(),
+                    scheduler.name()
+                ),
+            )),
+        }
+    }
+
+    /// A count of at least 1.
+    fn positive(&self, value: &Spanned<i64>, key: &str) -> Result<usize, SiteError> {
+        usize::try_from(*value.get_ref())
+            .ok()
+            .filter(|&count| count >= 1)
+            .ok_or_else(|| {
+                self.invalid(
+                    value.span().start,
+                    format!(
+                        "`{key}` is {}; give a whole number of at least 1",
+                        value.get_ref()
+                    ),
+                )
+            })
+    }
+
+    fn check_time_limit(&self, limit: Option<&Spanned<String>>) -> Result<(), SiteError> {
+        match limit {
+            Some(limit) if !is_time_limit(limit.get_ref()) => Err(self.invalid(
+                limit.span().start,
+                format!(
+                    "`time_limit` is {:?}; write it as HH:MM:SS, or D-HH:MM:SS for days",
+                    limit.get_ref()
+                ),
+            )),
+            _ => Ok(()),
+        }
+    }
+
+    /// Variables a job script can export as they are: a shell name, a value without a
+    /// newline or a single quote.
+    fn check_env(&self, env: &BTreeMap<String, Spanned<String>>) -> Result<(), SiteError> {
+        for (key, value) in env {
+            let good = !key.is_empty()
+                && !key.starts_with(|c: char| c.is_ascii_digit())
+                && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+            if !good || value.get_ref().contains(['\n', '\'']) {
+                return Err(self.invalid(
+                    value.span().start,
+                    format!(
+                        "`env.{key}`: a variable's name takes letters, digits and `_` (not first \
+                         a digit), and its value no newline nor `'`; rename or requote it"
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// The item of `all` whose name is `text`, or the names to choose from.

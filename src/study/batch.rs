@@ -62,33 +62,11 @@ pub fn run_jobs(
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create the jobs folder {}", dir.display()))?;
     let mut state = read_state(dir);
-    let mut waiting: BTreeMap<String, usize> = BTreeMap::new();
     let watching = dir.join(WATCHING);
     std::fs::write(&watching, "")
         .with_context(|| format!("cannot write {}", watching.display()))?;
     let watcher = watch_for_interrupt(dir);
-    let (mut reattached, mut submitted) = (0, 0);
-    for (index, job) in jobs.iter().enumerate() {
-        let id = match state.get(&job.name) {
-            Some(id) => {
-                reattached += 1;
-                id.clone()
-            }
-            None => {
-                for stale in [exit_file(dir, &job.name), output_file(dir, &job.name)] {
-                    let _ = std::fs::remove_file(stale);
-                }
-                let script = dir.join(format!("{}.sh", job.name));
-                write_atomically(&script, |out| out.write_all(job.script.as_bytes()))?;
-                let id = slurm::submit(&script).map_err(anyhow::Error::msg)?;
-                state.insert(job.name.clone(), id.clone());
-                write_state(dir, &state)?;
-                submitted += 1;
-                id
-            }
-        };
-        waiting.insert(id, index);
-    }
+    let (mut waiting, submitted, reattached) = submit(dir, jobs, &mut state)?;
     note(&format!(
         "{submitted} job(s) submitted{}; following them in {}",
         match reattached {
@@ -138,6 +116,40 @@ pub fn run_jobs(
     let _ = std::fs::remove_file(&watching);
     let _ = watcher.join();
     Ok(())
+}
+
+/// Submits the jobs not yet submitted (the others, found in `state` by name, are
+/// followed again), noting each new id in `state` at once. Returns the job of each id,
+/// and how many were submitted now and found from before.
+fn submit(
+    dir: &Path,
+    jobs: &[BatchJob],
+    state: &mut BTreeMap<String, String>,
+) -> anyhow::Result<(BTreeMap<String, usize>, usize, usize)> {
+    let mut waiting: BTreeMap<String, usize> = BTreeMap::new();
+    let (mut reattached, mut submitted) = (0, 0);
+    for (index, job) in jobs.iter().enumerate() {
+        let id = match state.get(&job.name) {
+            Some(id) => {
+                reattached += 1;
+                id.clone()
+            }
+            None => {
+                for stale in [exit_file(dir, &job.name), output_file(dir, &job.name)] {
+                    let _ = std::fs::remove_file(stale);
+                }
+                let script = dir.join(format!("{}.sh", job.name));
+                write_atomically(&script, |out| out.write_all(job.script.as_bytes()))?;
+                let id = slurm::submit(&script).map_err(anyhow::Error::msg)?;
+                state.insert(job.name.clone(), id.clone());
+                write_state(dir, state)?;
+                submitted += 1;
+                id
+            }
+        };
+        waiting.insert(id, index);
+    }
+    Ok((waiting, submitted, reattached))
 }
 
 /// The reason a job that wrote no exit code ended, for its row's `error`.

@@ -426,56 +426,12 @@ impl Sitting<'_> {
         let minutes = self.study.timeout.as_secs().div_ceil(60).max(1);
         site.time_limit
             .get_or_insert_with(|| format!("{:02}:{:02}:00", minutes / 60, minutes % 60));
-        let exe = this_exe()?.display().to_string();
-        let jobs: Vec<BatchJob> = todo
-            .iter()
-            .map(|&(rep, c)| {
-                let configuration = self.configurations[c];
-                let name = format!("{}-r{rep}", text_hash(&configuration.key()));
-                let mut program = vec![
-                    exe.clone(),
-                    "simulate".to_owned(),
-                    self.scene_files[c].display().to_string(),
-                ];
-                program.extend(configuration.simulate_args());
-                let job = Job {
-                    name: &name,
-                    dir: &dir,
-                    workdir: &workdir,
-                    program: &program,
-                };
-                let script = job_script(&site, configuration.layout(), &job);
-                BatchJob { name, script }
-            })
-            .collect();
+        let jobs = self.batch_jobs(todo, &site, &dir, &workdir)?;
         let (mut measured, mut failed) = (0, 0);
         let mut collect = |index: usize, end: JobEnd| -> anyhow::Result<()> {
             let (rep, c) = todo[index];
             let key = self.configurations[c].key();
-            let context = self.context(rep, c, &key);
-            let mut record = match end.code {
-                Some(code) => {
-                    let ended = Ended::Exited {
-                        status: std::os::unix::process::ExitStatusExt::from_raw(code << 8),
-                        stdout: end.stdout.clone(),
-                        stderr: end.stderr.clone(),
-                    };
-                    record_of(&context, Ok(ended), self.study.timeout)
-                }
-                None => {
-                    let status = match end.info.state {
-                        JobState::TimedOut => STATUS_TIMED_OUT,
-                        _ => STATUS_FAILED,
-                    };
-                    Record::failed(&context, status, batch::no_exit_code(&end))
-                }
-            };
-            record.job_id = end.id;
-            record.node_list = end.info.nodes;
-            record.queue_wait_s = end.info.queue_wait_s.unwrap_or(f64::NAN);
-            for warning in mask_warnings(&rank_cpus(&end.stderr)) {
-                eprintln!("warning: {key}, job {}: {warning}", record.job_id);
-            }
+            let record = self.record_of_job(rep, c, end);
             if record.status == STATUS_OK {
                 measured += 1;
             } else {
@@ -490,6 +446,72 @@ impl Sitting<'_> {
         };
         batch::run_jobs(&dir, &jobs, &mut collect, note)?;
         self.finish(todo, rows, kept, (measured, failed), Vec::new())
+    }
+
+    /// The job of each run of `todo`: its name (the configuration's key hashed, and the
+    /// repetition) and its script on `site`, started in `workdir`, writing into `dir`.
+    fn batch_jobs(
+        &self,
+        todo: &[(u32, usize)],
+        site: &Site,
+        dir: &Path,
+        workdir: &Path,
+    ) -> anyhow::Result<Vec<BatchJob>> {
+        let exe = this_exe()?.display().to_string();
+        Ok(todo
+            .iter()
+            .map(|&(rep, c)| {
+                let configuration = self.configurations[c];
+                let name = format!("{}-r{rep}", text_hash(&configuration.key()));
+                let mut program = vec![
+                    exe.clone(),
+                    "simulate".to_owned(),
+                    self.scene_files[c].display().to_string(),
+                ];
+                program.extend(configuration.simulate_args());
+                let job = Job {
+                    name: &name,
+                    dir,
+                    workdir,
+                    program: &program,
+                };
+                let script = job_script(site, configuration.layout(), &job);
+                BatchJob { name, script }
+            })
+            .collect())
+    }
+
+    /// The row of repetition `rep` of configuration `c` from how its job ended: its
+    /// summary when it wrote an exit code, else why it ended without one; with the job's
+    /// id, nodes and queue wait, and a warning for each rank whose CPUs were too few or
+    /// shared.
+    fn record_of_job(&self, rep: u32, c: usize, end: JobEnd) -> Record {
+        let key = self.configurations[c].key();
+        let context = self.context(rep, c, &key);
+        let mut record = match end.code {
+            Some(code) => {
+                let ended = Ended::Exited {
+                    status: std::os::unix::process::ExitStatusExt::from_raw(code << 8),
+                    stdout: end.stdout.clone(),
+                    stderr: end.stderr.clone(),
+                };
+                record_of(&context, Ok(ended), self.study.timeout)
+            }
+            None => {
+                let status = match end.info.state {
+                    JobState::TimedOut => STATUS_TIMED_OUT,
+                    _ => STATUS_FAILED,
+                };
+                Record::failed(&context, status, batch::no_exit_code(&end))
+            }
+        };
+        for warning in mask_warnings(&rank_cpus(&end.stderr)) {
+            eprintln!("warning: {key}, job {}: {warning}", end.id);
+        }
+        record.job_id = end.id;
+        record.node_list = end.info.nodes;
+        record.queue_wait_s = end.info.queue_wait_s.unwrap_or(f64::NAN);
+        record
     }
 }
 
