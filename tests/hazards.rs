@@ -268,7 +268,7 @@ fn a_results_folder_with_a_copy_counts_each_run_once_and_refuses_impossible_valu
     let table = String::from_utf8_lossy(&shown.stdout).into_owned();
     let line = table.lines().find(|l| l.starts_with("serial")).unwrap();
     let reps: Vec<&str> = line.split_whitespace().collect();
-    assert_eq!(reps[6], "2", "{table}");
+    assert_eq!(reps[7], "2", "{table}");
 
     let mut rows = records::read(&file).unwrap();
     rows[0].wall_s = -1.0;

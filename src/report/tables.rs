@@ -311,7 +311,7 @@ pub fn table(records: &[Record]) -> String {
             let ci = median_interval(&times, TIMING_CONFIDENCE, TIMING_SEED);
             // Under 10 ms of stepping: too short to time well.
             any_short |= median_s < TOO_SHORT_S;
-            let short = if median_s < TOO_SHORT_S { " ⏱" } else { "" };
+            let short = if median_s < TOO_SHORT_S { "⏱" } else { "" };
             (
                 format!("{median_s:.4}{short}"),
                 format!("{:.4}–{:.4}", ci.lower, ci.upper),
