@@ -62,6 +62,8 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         bytes_per_step_max: sent(2048.0),
         bytes_per_step_mean: sent(1536.0),
         collectives_per_step: (backend == "mpi").then_some(3.05),
+        load_imbalance: (backend == "mpi").then_some(1.02),
+        recuts: (backend == "mpi").then_some(0),
         kinetic_energy_initial: 500.0,
         kinetic_energy_final: 500.0,
         momentum_initial: [0.0, 0.0],
@@ -94,10 +96,10 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         z_reference_source: None,
         missed_collisions: None,
         missed_collision_fraction: None,
-        collapse_guard_fired: None,
-        collapse_tc: None,
         mean_overlap: Some(0.02),
         energy_relative_error: Some(0.0),
+        collapse_guard_fired: None,
+        collapse_tc: None,
         collapse_time: None,
         time_reached: None,
         tc: None,
@@ -317,8 +319,6 @@ fn speedups_efficiencies_and_warnings_are_computed_from_the_medians() {
     assert!(text.contains("Warning: backends disagree"), "{text}");
 }
 
-#[test]
-fn render_draws_the_disks_as_a_png_and_the_run_as_a_gif() {
 /// Every serial fraction a report prints ("f = …" of an Amdahl fit, a Karp–Flatt
 /// column), as numbers.
 fn serial_fractions(text: &str) -> Vec<f64> {
@@ -388,6 +388,8 @@ fn runs_under_ten_milliseconds_are_flagged_and_medians_carry_an_interval() {
     assert!(text.contains("run more steps"), "{text}");
 }
 
+#[test]
+fn render_draws_the_disks_as_a_png_and_the_run_as_a_gif() {
     use image::AnimationDecoder;
 
     let dir = tempfile::tempdir().unwrap();

@@ -167,6 +167,17 @@ pub struct Measured {
     pub draw_s: Option<f64>,
     /// What the ranks sent in the stepping loop (MPI only).
     pub traffic: Option<RankTraffic>,
+    /// How evenly the ranks held the disks (MPI only).
+    pub balance: Option<Balance>,
+}
+
+/// How evenly the ranks of a run held the disks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Balance {
+    /// The most disks a rank held over the mean over ranks, averaged over the steps.
+    pub imbalance: f64,
+    /// Times the ranks cut their slabs again during the stepping loop.
+    pub recuts: u64,
 }
 
 /// What a backend observed beyond the counters; `None` where it does not observe it.
@@ -180,6 +191,9 @@ pub struct Accuracy {
     pub collapse: Option<Collapse>,
     /// [t, kinetic energy per disk] at t = 0 and at up to [`CURVE_SAMPLES`] steps.
     pub temperature_curve: Option<Vec<[f64; 2]>>,
+    /// The run's observables in up to `SERIES_BLOCKS` blocks (serial and rayon: the same
+    /// bits).
+    pub series: Option<Vec<Block>>,
 }
 
 /// Where a run of the event method stopped at a detected inelastic collapse.
@@ -191,9 +205,6 @@ pub struct Collapse {
     pub steps: u64,
 }
 
-    /// The run's observables in up to `SERIES_BLOCKS` blocks (serial and rayon: the same
-    /// bits).
-    pub series: Option<Vec<Block>>,
 /// Samples of the temperature curve after t = 0.
 pub const CURVE_SAMPLES: u64 = 40;
 
@@ -227,18 +238,6 @@ pub fn summarize(
         ranks: workers.ranks,
         oversubscribed: workers.threads * workers.ranks > usable_cpus(),
         boundary: prepared.scene.domain.boundary.name().to_owned(),
-    // The observables after the equilibration cut, where the backend recorded a series.
-    let observed = accuracy
-        .series
-        .as_deref()
-        .and_then(|blocks| analyse(blocks, outcome.n));
-    // After the cut where the run settled, else from t = 0 (flagged: not equilibrated).
-    let production = observed.and_then(|o| o.settled);
-    let means = production.or(observed.map(|o| o.from_zero));
-    let area = prepared.scene.domain.area();
-    let reference = hard_disk_fluid(prepared, last)
-        .then(|| hard_disk_z(prepared.initial.packing))
-        .flatten();
         broadphase: prepared.params.broadphase.name().to_owned(),
         packing: prepared.initial.packing,
         seed: prepared.seed,
@@ -260,6 +259,8 @@ pub fn summarize(
         bytes_per_step_max: traffic.and_then(|t| per_step(t.bytes_max as f64)),
         bytes_per_step_mean: traffic.and_then(|t| per_step(t.bytes_mean)),
         collectives_per_step: traffic.and_then(|t| per_step(t.collectives as f64)),
+        load_imbalance: measured.balance.map(|balance| balance.imbalance),
+        recuts: measured.balance.map(|balance| balance.recuts),
         kinetic_energy_initial: measured.initial.kinetic_energy,
         kinetic_energy_final: outcome.last.kinetic_energy,
         momentum_initial: measured.initial.momentum,
@@ -274,6 +275,42 @@ pub fn summarize(
         events_per_s: outcome
             .is_event
             .then(|| (counters.pair_collisions + counters.wall_collisions) as f64 / wall_s),
+        missed_collisions: outcome.missed,
+        missed_collision_fraction: missed_fraction(outcome.missed, counters.pair_collisions),
+        mean_overlap: (counters.pair_collisions > 0)
+            .then(|| counters.overlap_sum / counters.pair_collisions as f64),
+        energy_relative_error: outcome.energy_relative_error,
+        collapse_guard_fired: outcome.collapse_guard.map(|(fired, _)| fired),
+        collapse_tc: outcome.collapse_guard.map(|(_, tc)| tc),
+        collapse_time: accuracy.collapse.map(|collapse| collapse.time),
+        time_reached: Some(outcome.duration),
+        tc: outcome.is_event.then_some(prepared.event.tc),
+        temperature_curve: accuracy.temperature_curve.clone(),
+        rms_step_over_radius: rms_step_over_radius(prepared),
+        choice: prepared.choice.clone(),
+        ..observed_summary(prepared, measured, &outcome, last)
+    }
+}
+
+/// The summary's observables: from the run's block series after the equilibration cut
+/// where the backend recorded one and the run settled, else from t = 0 (flagged: not
+/// equilibrated), else from the counters; with their error bars and the reference Z.
+fn observed_summary(
+    prepared: &PreparedRun,
+    measured: &Measured,
+    outcome: &Outcome,
+    last: &Particles,
+) -> RunSummary {
+    let counters = &measured.counters;
+    let observed =
+        (measured.accuracy.series.as_deref()).and_then(|blocks| analyse(blocks, outcome.n));
+    let production = observed.and_then(|o| o.settled);
+    let means = production.or(observed.map(|o| o.from_zero));
+    let area = prepared.scene.domain.area();
+    let reference = hard_disk_fluid(prepared, last)
+        .then(|| hard_disk_z(prepared.initial.packing))
+        .flatten();
+    RunSummary {
         collision_rate: means.map(|p| p.collision_rate.mean).or(Some(
             2.0 * counters.pair_collisions as f64 / (outcome.n.max(1) as f64 * outcome.duration),
         )),
@@ -297,22 +334,10 @@ pub fn summarize(
         collision_rate_g: production.map(|p| p.collision_rate.g),
         temperature_se: production.map(|p| p.temperature.se),
         temperature_g: production.map(|p| p.temperature.g),
-        missed_collisions: outcome.missed,
-        missed_collision_fraction: missed_fraction(outcome.missed, counters.pair_collisions),
-        mean_overlap: (counters.pair_collisions > 0)
-            .then(|| counters.overlap_sum / counters.pair_collisions as f64),
-        energy_relative_error: outcome.energy_relative_error,
-        collapse_guard_fired: outcome.collapse_guard.map(|(fired, _)| fired),
-        collapse_tc: outcome.collapse_guard.map(|(_, tc)| tc),
-        collapse_time: accuracy.collapse.map(|collapse| collapse.time),
-        time_reached: Some(outcome.duration),
-        tc: outcome.is_event.then_some(prepared.event.tc),
-        temperature_curve: accuracy.temperature_curve.clone(),
-        rms_step_over_radius: rms_step_over_radius(prepared),
-        choice: prepared.choice.clone(),
         z_reference: reference.map(|r| r.z),
         z_reference_se: reference.map(|r| r.se),
         z_reference_source: reference.map(|r| r.source.to_owned()),
+        ..RunSummary::default()
     }
 }
 
@@ -375,6 +400,16 @@ impl Outcome {
     }
 }
 
+/// Whether the run is the fluid the reference equations of state describe: equal
+/// elastic disks in a periodic box without a field.
+fn hard_disk_fluid(prepared: &PreparedRun, last: &Particles) -> bool {
+    let scene = &prepared.scene;
+    scene.domain.boundary == Boundary::Periodic
+        && scene.physics.is_elastic()
+        && scene.physics.gravity.is_none()
+        && last.max_radius() == prepared.initial.min_radius
+}
+
 /// (E_final − E_initial)/E_initial of the energy a scene should conserve: kinetic plus,
 /// in a field, potential energy. `None` where it need not be conserved: collisions that
 /// lose energy, or a field in a periodic box, where a disk crossing the edge jumps in
@@ -388,16 +423,6 @@ fn conserved_energy_error(
     let field_in_periodic_box =
         scene.physics.gravity.is_some() && scene.domain.boundary == Boundary::Periodic;
     let initial = initial_kinetic + prepared.initial.potential_energy;
-/// Whether the run is the fluid the reference equations of state describe: equal
-/// elastic disks in a periodic box without a field.
-fn hard_disk_fluid(prepared: &PreparedRun, last: &Particles) -> bool {
-    let scene = &prepared.scene;
-    scene.domain.boundary == Boundary::Periodic
-        && scene.physics.is_elastic()
-        && scene.physics.gravity.is_none()
-        && last.max_radius() == prepared.initial.min_radius
-}
-
     (scene.physics.is_elastic() && !field_in_periodic_box && initial > 0.0)
         .then(|| (last_kinetic + last_potential - initial) / initial)
 }

@@ -67,6 +67,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
         accuracy,
         draw_s,
         traffic: None,
+        balance: None,
     };
     let workers = Workers {
         backend: BackendKind::Serial,
@@ -117,8 +118,8 @@ fn step_method(
             }
         }
         curve.sample(prepared, step, particles);
-        draw_step(offscreen, particles);
         curve.close_block(prepared, step, &stepper.counters(), particles);
+        draw_step(offscreen, particles);
         ControlFlow::Continue(())
     });
     let accuracy = Accuracy {
@@ -154,14 +155,14 @@ fn event_method(
             // The run ends where the method broke down; so does its curve.
             Some(time) => {
                 curve.push(time, particles);
-                collapse = Some(Collapse { time, steps: step });
                 curve.close_block_at(time, &sim.counters(), particles);
+                collapse = Some(Collapse { time, steps: step });
                 ControlFlow::Break(())
             }
             None => {
                 curve.sample(prepared, step, particles);
-                ControlFlow::Continue(())
                 curve.close_block(prepared, step, &sim.counters(), particles);
+                ControlFlow::Continue(())
             }
         }
     });
@@ -179,20 +180,19 @@ struct Curve {
     /// `None` in an elastic scene, whose temperature stays where it started: a point
     /// reads every disk (at 10⁶ disks and 50 steps, 40 points took a fifth of the run).
     points: Option<Vec<[f64; 2]>>,
-    seconds: f64,
     series: SeriesRecorder,
+    seconds: f64,
 }
 
 impl Curve {
     fn new(particles: &Particles, physics: &Physics) -> Curve {
         Curve {
             points: (!physics.is_elastic()).then(|| vec![[0.0, temperature(particles)]]),
-            seconds: 0.0,
             series: SeriesRecorder::new(observe(particles).kinetic_energy, physics),
+            seconds: 0.0,
         }
     }
 
-    /// Records a point after `step` if it is one of the sampled steps.
     /// Closes a block of the series after `step` if it ends one.
     fn close_block(
         &mut self,
@@ -213,6 +213,7 @@ impl Curve {
         });
     }
 
+    /// Records a point after `step` if it is one of the sampled steps.
     fn sample(&mut self, prepared: &PreparedRun, step: u64, particles: &Particles) {
         if is_curve_sample(step, prepared.steps) {
             self.push(step as f64 * prepared.params.dt, particles);

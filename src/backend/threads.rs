@@ -118,6 +118,7 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
         },
         draw_s,
         traffic: None,
+        balance: None,
     };
     let workers = Workers {
         backend: BackendKind::Rayon,

@@ -9,8 +9,9 @@ use crate::stats::observables::MIN_EFFECTIVE_POINTS;
 use crate::stats::reference::{Reference, z_score};
 
 /// One run's measurements. Field names are a public interface: scripts and the study
-/// driver read them. Times are wall-clock seconds.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// driver read them. Times are wall-clock seconds. (`Default` is a base to fill, as
+/// `backend::summarize` does in parts; no run reports it.)
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct RunSummary {
     /// Number of disks.
     pub n: usize,
@@ -84,6 +85,14 @@ pub struct RunSummary {
     /// per step, the same on every rank; null for serial and rayon.
     #[serde(default)]
     pub collectives_per_step: Option<f64>,
+    /// MPI: the most disks a rank held over the mean over ranks, averaged over the steps
+    /// (1: even); null for serial and rayon.
+    #[serde(default)]
+    pub load_imbalance: Option<f64>,
+    /// MPI: times the ranks cut their slabs again to even out their disks; null for
+    /// serial and rayon.
+    #[serde(default)]
+    pub recuts: Option<u64>,
     pub kinetic_energy_initial: f64,
     pub kinetic_energy_final: f64,
     /// Total momentum [px, py] before the first step.
@@ -162,14 +171,6 @@ pub struct RunSummary {
     pub temperature_se: Option<f64>,
     #[serde(default)]
     pub temperature_g: Option<f64>,
-    /// Mean overlap of the pairs that received an impulse, as a fraction of their contact
-    /// distance (rounding-sized for the event method); null without pair collisions.
-    #[serde(default)]
-    pub mean_overlap: Option<f64>,
-    /// (E_final − E_initial) / E_initial for elastic scenes (e = 1 for pairs and walls);
-    /// null otherwise (then energy loss is physics: see `temperature_curve`).
-    #[serde(default)]
-    pub energy_relative_error: Option<f64>,
     /// Equal elastic disks in a periodic box without a field: the reference Z at this
     /// packing (an equation of state, or a tabulated value with its N and box), its
     /// standard uncertainty and its source; null elsewhere.
@@ -187,6 +188,14 @@ pub struct RunSummary {
     /// missed_collisions / (missed_collisions + pair_collisions), null when either is.
     #[serde(default)]
     pub missed_collision_fraction: Option<f64>,
+    /// Mean overlap of the pairs that received an impulse, as a fraction of their contact
+    /// distance (rounding-sized for the event method); null without pair collisions.
+    #[serde(default)]
+    pub mean_overlap: Option<f64>,
+    /// (E_final − E_initial) / E_initial for elastic scenes (e = 1 for pairs and walls);
+    /// null otherwise (then energy loss is physics: see `temperature_curve`).
+    #[serde(default)]
+    pub energy_relative_error: Option<f64>,
     /// Event method with e < 1: collisions the TC model made elastic; else null.
     #[serde(default)]
     pub collapse_guard_fired: Option<u64>,
@@ -324,6 +333,13 @@ impl RunSummary {
                  {bytes:.0} bytes (most {bytes_max:.0}), {collectives:.2} collectives"
             )?;
         }
+        if let (Some(imbalance), Some(recuts)) = (self.load_imbalance, self.recuts) {
+            writeln!(
+                f,
+                "balance    the busiest rank held {imbalance:.3}× the mean disks (over the \
+                 steps); slabs cut again {recuts} times"
+            )?;
+        }
         Ok(())
     }
 
@@ -384,20 +400,6 @@ impl RunSummary {
                  from t = 0, transient included)"
             ),
             _ => Ok(()),
-        }
-    }
-
-    /// Sentences flagging an error bar that cannot be trusted: too few independent
-    /// points, or no plateau in the blocking curve.
-    pub fn equilibration_warnings(&self) -> Vec<String> {
-        let mut warnings = Vec::new();
-        if let Some(n_eff) = self.compressibility_z_n_eff
-            && n_eff < MIN_EFFECTIVE_POINTS
-        {
-            warnings.push(format!(
-                "Z is worth {n_eff:.0} independent points (under {MIN_EFFECTIVE_POINTS:.0}): \
-                 its error bar is itself uncertain; run longer"
-            ));
         }?;
         self.write_reference(f)
     }
@@ -427,6 +429,20 @@ impl RunSummary {
             f,
             "reference  Z = {z_ref:.5} ± {se_ref:.5} ({source}); {comparison}"
         )
+    }
+
+    /// Sentences flagging an error bar that cannot be trusted: too few independent
+    /// points, or no plateau in the blocking curve.
+    pub fn equilibration_warnings(&self) -> Vec<String> {
+        let mut warnings = Vec::new();
+        if let Some(n_eff) = self.compressibility_z_n_eff
+            && n_eff < MIN_EFFECTIVE_POINTS
+        {
+            warnings.push(format!(
+                "Z is worth {n_eff:.0} independent points (under {MIN_EFFECTIVE_POINTS:.0}): \
+                 its error bar is itself uncertain; run longer"
+            ));
+        }
         if self.compressibility_z_plateau == Some(false) {
             warnings.push(
                 "the blocking curve of Z has no plateau: its error bar may be too small; \
@@ -437,21 +453,6 @@ impl RunSummary {
         warnings
     }
 
-            show(self.collision_rate),
-            show(self.pressure),
-            show(self.compressibility_z),
-            count(self.missed_collisions),
-            show(self.missed_collision_fraction),
-            show(self.mean_overlap)
-        )?;
-        if let Some(guard) = self.collapse_guard_fired {
-            writeln!(
-                f,
-                "collapse   TC guard fired {guard} times (tc = {})",
-                show(self.collapse_tc)
-            )?;
-        }
-        if let Some(time) = self.collapse_time {
     /// The method, its accuracy measures, the collapse guard and any automatic choice.
     fn write_method_and_accuracy(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let show =
@@ -467,6 +468,22 @@ impl RunSummary {
         writeln!(
             f,
             "accuracy   collision rate {}, pressure {}, Z {}, missed {} (fraction {}), mean overlap {}",
+            show(self.collision_rate),
+            show(self.pressure),
+            show(self.compressibility_z),
+            count(self.missed_collisions),
+            show(self.missed_collision_fraction),
+            show(self.mean_overlap)
+        )?;
+        self.write_equilibration(f)?;
+        if let Some(guard) = self.collapse_guard_fired {
+            writeln!(
+                f,
+                "collapse   TC guard fired {guard} times (tc = {})",
+                show(self.collapse_tc)
+            )?;
+        }
+        if let Some(time) = self.collapse_time {
             writeln!(
                 f,
                 "collapse   inelastic collapse detected at t = {time:.6e}: the event method stopped there, in step {}",
@@ -474,7 +491,6 @@ impl RunSummary {
             )?;
         }
         if let Some(choice) = &self.choice {
-        self.write_equilibration(f)?;
             writeln!(f, "chosen     {choice}")?;
         }
         Ok(())

@@ -440,11 +440,14 @@ impl EventSim {
         let (ga, gb) = (self.agendas[a as usize], self.agendas[b as usize]);
         let guarded =
             now - ga.last_collision < self.params.tc || now - gb.last_collision < self.params.tc;
-        let e = if guarded {
+        let law = if guarded {
             self.collapse_guard_fired += u64::from(self.physics.restitution < 1.0);
-            1.0
+            Physics {
+                restitution: 1.0,
+                ..self.physics
+            }
         } else {
-            self.physics.restitution
+            self.physics
         };
         let side = |f: &Flight, g: &Agenda| PairSide {
             mass: g.mass,
@@ -452,7 +455,7 @@ impl EventSim {
             vy: f.vy,
         };
         let ([[vax, vay], [vbx, vby]], impulse) = exchange_along(
-            e,
+            &law,
             dx / distance,
             dy / distance,
             side(&fa, &ga),

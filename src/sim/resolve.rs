@@ -31,7 +31,7 @@
 //! sweeping each chain on its own: a backend may call this on any union of whole chains.
 
 use super::collision::{ContactOutcome, DiskState, resolve_contact};
-use super::counters::StepCounters;
+use super::counters::{StepCounters, virial_term};
 use super::grid::Contact;
 use super::scene::{Boundary, Domain, Physics, wrap_periodic};
 
@@ -181,7 +181,7 @@ fn sweep<S: DiskState>(
         if speed > bounce.tolerance {
             let ContactOutcome { virial, .. } =
                 resolve_contact(disks, domain, &bounce.pair(physics, speed), a, b);
-            counters.virial += virial;
+            counters.virial += virial_term(virial);
             applied = true;
         }
     }
