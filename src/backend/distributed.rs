@@ -238,6 +238,15 @@ const REBALANCE_ABOVE: f64 = 1.1;
 /// not allow an even cut, and cutting again cannot do better than the disks allow.
 const REBALANCE_GAIN: f64 = 0.05;
 
+/// The rank that owns each of `n_strips` strips cut into `slabs`.
+fn owners(slabs: &[Range<usize>], n_strips: usize) -> Vec<usize> {
+    let mut owner = vec![0; n_strips];
+    for (rank, strips) in slabs.iter().enumerate() {
+        owner[strips.clone()].fill(rank);
+    }
+    owner
+}
+
 /// One rank's part of a cut of the strips into slabs: its slab, every strip's owner,
 /// the ranks near it, the rank its ghosts come from, and its slab's grid, filled with
 /// the disks given.
@@ -258,10 +267,7 @@ impl SlabPart {
         particles: &Particles,
     ) -> SlabPart {
         let slab = slabs[me].clone();
-        let mut owner = vec![0; layout.n_strips];
-        for (rank, strips) in slabs.iter().enumerate() {
-            owner[strips.clone()].fill(rank);
-        }
+        let owner = owners(slabs, layout.n_strips);
         let mut grid = StripGrid::window(domain, layout, slab.clone());
         grid.fill(particles, 0..particles.len());
         let periodic = domain.boundary == Boundary::Periodic;
@@ -694,16 +700,10 @@ impl RankState {
             .max()
             .unwrap_or(0);
         self.cut_share = most as f64 * comm.size() as f64 / self.n_disks as f64;
-        let owner_of = |particles: &Particles, idx: usize| {
-            let strip = self.layout.strip_of(particles.y[idx]);
-            slabs
-                .iter()
-                .position(|slab| slab.contains(&strip))
-                .unwrap_or(me)
-        };
+        let new_owner = owners(&slabs, self.layout.n_strips);
         let mut outgoing = vec![Vec::new(); comm.size()];
         for idx in 0..self.particles.len() {
-            let to = owner_of(&self.particles, idx);
+            let to = new_owner[self.layout.strip_of(self.particles.y[idx])];
             self.particles.pack(idx, &mut outgoing[to]);
         }
         let staying = std::mem::take(&mut outgoing[me]);
