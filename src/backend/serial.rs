@@ -13,9 +13,7 @@ use crate::run::backend_kind::BackendKind;
 use crate::run::spec::{Method, Observe, PreparedRun, RunSpec};
 use crate::sim::Stepper;
 use crate::sim::event::EventSim;
-use crate::sim::observe::{
-    MissedCollisions, SERIES_BLOCKS, SeriesRecorder, ends_interval, observe, temperature,
-};
+use crate::sim::observe::{MissedCollisions, SeriesRecorder, block_end, observe, temperature};
 use crate::sim::{Particles, Physics, StepCounters};
 use crate::system::machine::LoopSeconds;
 
@@ -201,8 +199,8 @@ impl Curve {
         counters: &StepCounters,
         particles: &Particles,
     ) {
-        if ends_interval(step, prepared.steps, SERIES_BLOCKS) {
-            self.close_block_at(step as f64 * prepared.params.dt, counters, particles);
+        if let Some(time) = block_end(step, prepared.steps, prepared.params.dt) {
+            self.close_block_at(time, counters, particles);
         }
     }
 

@@ -31,7 +31,7 @@ use crate::sim::grid::{
 use crate::sim::neighbours::{
     DISPLACEMENT_BLOCK, Displacements, PairList, Skin, with_reorder_scratch,
 };
-use crate::sim::observe::{SERIES_BLOCKS, SeriesRecorder, ends_interval, observe};
+use crate::sim::observe::{SeriesRecorder, block_end, observe};
 use crate::sim::pieces::{InTurn, MIN_STREAMING_PIECE, Pieces};
 use crate::sim::prefetch::prefetch;
 use crate::sim::resolve::resolve_contacts;
@@ -87,8 +87,7 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
             let setup_s = setup_start.elapsed().as_secs_f64();
             let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Process, |step| {
                 stepper.step(&mut particles, team);
-                if ends_interval(step, prepared.steps, SERIES_BLOCKS) {
-                    let time = step as f64 * prepared.params.dt;
+                if let Some(time) = block_end(step, prepared.steps, prepared.params.dt) {
                     timed(&mut series_s, || {
                         series.close_block(time, &stepper.counters, &particles)
                     });
