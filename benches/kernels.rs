@@ -27,7 +27,7 @@ use std::time::{Duration, Instant};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group};
 
 use collide::backend::comm::ThreadComm;
-use collide::backend::distributed;
+use collide::backend::distributed::{self, FinalState};
 use collide::backend::team::with_team;
 use collide::backend::threads::ThreadedStepper;
 use collide::run::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
@@ -263,7 +263,9 @@ fn distributed_step(c: &mut Criterion) {
                 let wall_s = std::thread::scope(|scope| {
                     let ranks: Vec<_> = ThreadComm::group(RANKS)
                         .into_iter()
-                        .map(|comm| scope.spawn(move || distributed::run(&comm, spec)))
+                        .map(|comm| {
+                            scope.spawn(move || distributed::run(&comm, spec, FinalState::Summed))
+                        })
                         .collect();
                     let outcomes: Vec<_> = ranks.into_iter().map(|r| r.join()).collect();
                     outcomes

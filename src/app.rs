@@ -354,8 +354,8 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     };
     let summary = match finished {
         Finished::Here(outcome) => {
-            if let Some(path) = &args.dump {
-                write_atomically(path, |out| write_state_csv(out, &outcome.final_state))?;
+            if let (Some(path), Some(state)) = (&args.dump, &outcome.final_state) {
+                write_atomically(path, |out| write_state_csv(out, state))?;
             }
             outcome.summary
         }
@@ -425,12 +425,19 @@ fn run_mpi(
     spec: &crate::run::spec::RunSpec,
     ranks: Option<NonZeroUsize>,
 ) -> anyhow::Result<Finished> {
+    use crate::backend::distributed::FinalState;
     use crate::backend::{launcher, mpi};
     if mpi::launched_by_mpi() {
-        return Ok(match mpi::run_rank(spec, ranks.map(NonZeroUsize::get))? {
-            Some(outcome) => Finished::Here(outcome),
-            None => Finished::OtherRank,
-        });
+        let final_state = match args.dump {
+            Some(_) => FinalState::Gathered,
+            None => FinalState::Summed,
+        };
+        return Ok(
+            match mpi::run_rank(spec, ranks.map(NonZeroUsize::get), final_state)? {
+                Some(outcome) => Finished::Here(outcome),
+                None => Finished::OtherRank,
+            },
+        );
     }
     let site = match &args.system {
         Some(system) => crate::cluster::site::Site::find(system)?,

@@ -344,7 +344,7 @@ fn two_disks_head_on_meet_at_the_exact_time_with_the_exact_velocities() {
     let s = &outcome.summary;
     assert_eq!((s.pair_collisions, s.wall_collisions), (1, 0));
     assert_eq!(s.missed_collisions, Some(0));
-    let disks = outcome.final_state.disks_by_id();
+    let disks = outcome.final_state.unwrap().disks_by_id();
     assert_eq!((disks[0].vx, disks[1].vx), (-1.0, 1.0));
     // dt = 0.001 over 12,000 intervals: each interval's end is k·dt, so the positions
     // carry only rounding (a few ulps of 50 per interval at most).

@@ -268,7 +268,10 @@ fn refused_or_sound(text: &str) -> Result<Outcome, String> {
     }
     let prepared = spec.prepare().map_err(|e| e.to_string())?;
     let domain = prepared.scene.domain;
-    let particles = &outcome.final_state;
+    let particles = outcome
+        .final_state
+        .as_ref()
+        .expect("serial runs keep the final state");
     // Without a field energy never grows, so no disk is ever faster than v_bound, and a
     // disk at a wall overshoots it by at most one step before it is turned back (or
     // stopped there, with wall_restitution = 0). With a field, coarse steps let disks

@@ -42,7 +42,7 @@ fn mpi_at_1_2_3_and_4_ranks_gives_the_serial_hash() {
 #[test]
 fn mpi_ranks_count_what_they_send_as_ranks_run_as_threads_do() {
     use collide::backend::comm::ThreadComm;
-    use collide::backend::distributed;
+    use collide::backend::distributed::{self, FinalState};
     use collide::run::overrides::Overrides;
     use collide::run::scene_file;
 
@@ -52,7 +52,9 @@ fn mpi_ranks_count_what_they_send_as_ranks_run_as_threads_do() {
         let outcomes: Vec<_> = std::thread::scope(|scope| {
             let handles: Vec<_> = ThreadComm::group(ranks)
                 .into_iter()
-                .map(|comm| scope.spawn(move || distributed::run(&comm, spec).unwrap()))
+                .map(|comm| {
+                    scope.spawn(move || distributed::run(&comm, spec, FinalState::Summed).unwrap())
+                })
                 .collect();
             handles.into_iter().map(|h| h.join().unwrap()).collect()
         });

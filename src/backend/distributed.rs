@@ -32,7 +32,7 @@ use crate::sim::grid::{
     Contact, Mover, StripGrid, StripLayout, receive_band, refresh_band, sort_movers,
 };
 use crate::sim::neighbours::{PairList, Skin, with_reorder_scratch};
-use crate::sim::observe::{Observables, observe};
+use crate::sim::observe::{Observables, StateSums, observe};
 use crate::sim::particles::{PACKED_LEN, SPARE_SHARE};
 use crate::sim::pieces::InTurn;
 use crate::sim::resolve::resolve_contacts;
@@ -42,15 +42,19 @@ use crate::sim::{Boundary, Particles, StepCounters};
 use crate::system::machine::LoopSeconds;
 
 /// Runs `spec` on every rank of `comm` (all ranks call this together). Rank 0 returns
-/// the summary and the whole final state; the other ranks return `None`.
-pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcome>, BackendError> {
+/// the summary, and the whole final state when `final_state` asks for it; the other
+/// ranks return `None`.
+pub fn run<C: Communicator>(
+    comm: &C,
+    spec: &RunSpec,
+    final_state: FinalState,
+) -> Result<Option<RunOutcome>, BackendError> {
     let setup_start = Instant::now();
     let comm = &Counting::new(comm);
     // Every rank builds the same initial state from the seed, keeps its slab and lets
     // the rest go.
     let mut prepared = spec.prepare()?;
     let scene = &prepared.scene;
-    let n_disks = scene.particles.len();
     let initial = observe(&scene.particles);
     let skin = Skin::for_scene(&scene.domain, &scene.particles, prepared.params.dt);
     let layout = StripLayout::with_skin(&scene.domain, &scene.particles, skin.width());
@@ -73,22 +77,24 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
     });
     let sent = comm.traffic().since(&sent_before);
 
-    // The whole state, on rank 0 only; the counters, on every rank.
-    let mut to_first = vec![Vec::new(); comm.size()];
-    to_first[0].reserve_exact(rank.particles.len() * PACKED_LEN);
-    for idx in 0..rank.particles.len() {
-        rank.particles.pack(idx, &mut to_first[0]);
-    }
-    let states = comm.exchange(&to_first);
-    drop(to_first);
-    let figures = rank_figures(&rank, &seconds, &sent);
+    // Each rank sums its own disks; the sums merge exactly, in any order, into the
+    // serial run's figures and state hash. The disks themselves go to rank 0 only when
+    // asked for.
+    let own = StateSums::of(
+        &rank.particles,
+        0..rank.n_own,
+        prepared.scene.physics.gravity,
+    );
+    let mut figures = rank_figures(&rank, &seconds, &sent).to_vec();
+    figures.extend(own.to_words());
     let all_figures = comm.all_gather(&figures);
+    let states = (final_state == FinalState::Gathered).then(|| rank.gather_on_first(comm));
     if comm.rank() != 0 {
         return Ok(None);
     }
-    let mut last = Particles::with_capacity(n_disks);
-    for packed in &states {
-        last.unpack_append(packed);
+    let mut last = StateSums::default();
+    for figures in &all_figures {
+        last.merge(&StateSums::from_words(&figures[RANK_FIGURES..]));
     }
     let mut measured = merge_figures(&all_figures, rank.shared_counters, setup_s, initial);
     measured.balance = (rank.steps > 0).then(|| Balance {
@@ -100,16 +106,32 @@ pub fn run<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<Option<RunOutcom
         threads: 1,
         ranks: comm.size(),
     };
-    let summary = summarize(&prepared, workers, &measured, &last);
     Ok(Some(RunOutcome {
-        summary,
-        final_state: last,
+        summary: summarize(&prepared, workers, &measured, &last),
+        final_state: states.map(|states| {
+            let mut whole = Particles::with_capacity(last.disks as usize);
+            for packed in &states {
+                whole.unpack_append(packed);
+            }
+            whole
+        }),
     }))
 }
 
+/// Whether a distributed run sends its whole final state to rank 0 (`--dump`), or
+/// only the sums every figure of its summary comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FinalState {
+    Gathered,
+    Summed,
+}
+
+/// Values of [`rank_figures`].
+const RANK_FIGURES: usize = 15;
+
 /// What a rank tells the others after the loop, in one gathered array: its counters,
 /// its stage and loop seconds, and what it sent.
-fn rank_figures(rank: &RankState, seconds: &LoopSeconds, sent: &Traffic) -> [f64; 15] {
+fn rank_figures(rank: &RankState, seconds: &LoopSeconds, sent: &Traffic) -> [f64; RANK_FIGURES] {
     let c = &rank.counters;
     let s = &rank.stages;
     [
@@ -404,6 +426,17 @@ fn peers_of(owner: &[usize], slab: &Range<usize>, periodic: bool, me: usize) -> 
 }
 
 impl RankState {
+    /// Sends the own disks, packed, to rank 0 (all ranks call this together): rank 0
+    /// gets every rank's in rank order, the others nothing.
+    fn gather_on_first<C: Communicator>(&self, comm: &C) -> Vec<Vec<f64>> {
+        let mut to_first = vec![Vec::new(); comm.size()];
+        to_first[0].reserve_exact(self.n_own * PACKED_LEN);
+        for idx in 0..self.n_own {
+            self.particles.pack(idx, &mut to_first[0]);
+        }
+        comm.exchange(&to_first)
+    }
+
     fn new<C: Communicator>(
         comm: &C,
         scene: &crate::sim::Scene,
@@ -1039,10 +1072,14 @@ mod tests {
     }
 
     fn run_on_threads(spec: &RunSpec, ranks: usize) -> RunOutcome {
+        run_on_threads_with(spec, ranks, FinalState::Summed)
+    }
+
+    fn run_on_threads_with(spec: &RunSpec, ranks: usize, final_state: FinalState) -> RunOutcome {
         let outcomes: Vec<Option<RunOutcome>> = std::thread::scope(|scope| {
             let handles: Vec<_> = ThreadComm::group(ranks)
                 .into_iter()
-                .map(|comm| scope.spawn(move || run(&comm, spec).unwrap()))
+                .map(|comm| scope.spawn(move || run(&comm, spec, final_state).unwrap()))
                 .collect();
             handles.into_iter().map(|h| h.join().unwrap()).collect()
         });
@@ -1066,10 +1103,34 @@ mod tests {
                         assert_eq!(summary.wall_collisions, reference.wall_collisions, "{case}");
                         assert_eq!(summary.max_overlap, reference.max_overlap, "{case}");
                         assert_eq!(summary.n, reference.n);
+                        // Each rank sums its own disks; the sums merge into the same bits.
+                        let figures = |s: &crate::run::summary::RunSummary| {
+                            [
+                                s.kinetic_energy_final,
+                                s.momentum_final[0],
+                                s.momentum_final[1],
+                            ]
+                            .map(f64::to_bits)
+                        };
+                        assert_eq!(figures(&summary), figures(&reference), "{case}");
                     }
                 }
             }
         }
+    }
+
+    /// Rank 0 holds every disk at the end only when the run is asked for its final
+    /// state (`--dump`): then it is the serial run's, disk for disk.
+    #[test]
+    fn the_final_state_reaches_rank_0_only_when_asked_for() {
+        let spec = spec(Boundary::Walls, 0.8, 0.35);
+        let reference = serial::run(&spec).unwrap();
+        let summed = run_on_threads_with(&spec, 3, FinalState::Summed);
+        assert!(summed.final_state.is_none());
+        let gathered = run_on_threads_with(&spec, 3, FinalState::Gathered);
+        let disks = |outcome: &RunOutcome| outcome.final_state.as_ref().unwrap().disks_by_id();
+        assert_eq!(disks(&gathered), disks(&reference));
+        assert_eq!(gathered.summary.state_hash, summed.summary.state_hash);
     }
 
     #[test]
@@ -1240,7 +1301,7 @@ mod tests {
         let reference = serial::run(&spec).unwrap();
         let most_in_first_cut = (first_cut.iter())
             .map(|slab| {
-                let last = &reference.final_state;
+                let last = reference.final_state.as_ref().unwrap();
                 (last.y.iter())
                     .filter(|&&y| slab.contains(&layout.strip_of(y)))
                     .count()
@@ -1284,11 +1345,11 @@ mod tests {
             method: MethodSpec::stepped(0.02, 6000, Broadphase::Grid),
             slowdown: InjectedSlowdown::NONE,
         };
-        let settled = serial::run(&spec).unwrap();
-        let settled_top = settled.final_state.y.iter().fold(0.0_f64, |a, &b| a.max(b));
+        let settled = serial::run(&spec).unwrap().final_state.unwrap();
+        let settled_top = settled.y.iter().fold(0.0_f64, |a, &b| a.max(b));
         let prepared = spec.prepare().unwrap();
         spec.scene = SceneSource::Explicit(crate::sim::Scene {
-            particles: settled.final_state,
+            particles: settled,
             ..prepared.scene
         });
         spec.method = MethodSpec::stepped(0.02, 20, Broadphase::Grid);

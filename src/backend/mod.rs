@@ -23,8 +23,7 @@ use crate::run::backend_kind::BackendKind;
 use crate::run::spec::{InjectedSlowdown, Method, PreparedRun};
 use crate::run::summary::RunSummary;
 use crate::sim::observe::{
-    Block, Observables, Thermodynamics, ends_interval, observe, potential_energy, state_hash,
-    thermodynamics,
+    Block, Observables, StateSums, Thermodynamics, ends_interval, thermodynamics,
 };
 use crate::sim::scene::PlacementError;
 use crate::sim::{Boundary, Particles, StepCounters};
@@ -61,11 +60,12 @@ pub enum BackendError {
     Mpi(String),
 }
 
-/// What a run leaves behind: its summary and the final state (for `--dump`).
+/// What a run leaves behind: its summary and the final state (for `--dump`), which an
+/// MPI run gathers only when asked.
 #[derive(Clone, Debug)]
 pub struct RunOutcome {
     pub summary: RunSummary,
-    pub final_state: Particles,
+    pub final_state: Option<Particles>,
 }
 
 /// Seconds spent in each stage of the stepping loop, summed over the steps.
@@ -214,12 +214,13 @@ pub fn is_curve_sample(step: u64, steps: u64) -> bool {
     ends_interval(step, steps, CURVE_SAMPLES)
 }
 
-/// The summary of a finished run; `last` is the whole final state in any storage order.
+/// The summary of a finished run; `last` holds the sums over every disk of the final
+/// state (taken in the scene's field), however they were divided.
 pub fn summarize(
     prepared: &PreparedRun,
     workers: Workers,
     measured: &Measured,
-    last: &Particles,
+    last: &StateSums,
 ) -> RunSummary {
     let outcome = Outcome::of(prepared, measured, last);
     let (steps, wall_s) = (outcome.steps, measured.wall_s);
@@ -269,7 +270,7 @@ pub fn summarize(
         wall_collisions: measured.counters.wall_collisions,
         max_overlap: measured.counters.max_overlap,
         max_wall_penetration: measured.counters.max_wall_penetration,
-        state_hash: state_hash(last),
+        state_hash: last.state_hash(),
         method: prepared.method.name().to_owned(),
         observe: prepared.observe.name().to_owned(),
         events_per_s: outcome
@@ -299,7 +300,7 @@ fn observed_summary(
     prepared: &PreparedRun,
     measured: &Measured,
     outcome: &Outcome,
-    last: &Particles,
+    last: &StateSums,
 ) -> RunSummary {
     let counters = &measured.counters;
     let observed =
@@ -358,16 +359,16 @@ struct Outcome {
 }
 
 impl Outcome {
-    fn of(prepared: &PreparedRun, measured: &Measured, last: &Particles) -> Outcome {
-        let n = last.len();
+    fn of(prepared: &PreparedRun, measured: &Measured, last: &StateSums) -> Outcome {
+        let n = last.disks as usize;
         let accuracy = &measured.accuracy;
         let (steps, duration) = match accuracy.collapse {
             Some(collapse) => (collapse.steps, collapse.time),
             None => (prepared.steps, prepared.steps as f64 * prepared.params.dt),
         };
         let physics = &prepared.scene.physics;
-        let last_potential = potential_energy(last, physics.gravity);
-        let last = observe(last);
+        let last_potential = last.potential_energy();
+        let last = last.observables();
         let initial_energy = measured.initial.kinetic_energy;
         let thermo = thermodynamics(
             n,
@@ -402,12 +403,12 @@ impl Outcome {
 
 /// Whether the run is the fluid the reference equations of state describe: equal
 /// elastic disks in a periodic box without a field.
-fn hard_disk_fluid(prepared: &PreparedRun, last: &Particles) -> bool {
+fn hard_disk_fluid(prepared: &PreparedRun, last: &StateSums) -> bool {
     let scene = &prepared.scene;
     scene.domain.boundary == Boundary::Periodic
         && scene.physics.is_elastic()
         && scene.physics.gravity.is_none()
-        && last.max_radius() == prepared.initial.min_radius
+        && last.max_radius == prepared.initial.min_radius
 }
 
 /// (E_final − E_initial)/E_initial of the energy a scene should conserve: kinetic plus,

@@ -9,7 +9,8 @@ use mpi::topology::SimpleCommunicator;
 use mpi::traits::{Communicator as _, CommunicatorCollectives, Destination, Source};
 
 use crate::backend::comm::{COUNT_BYTES, Communicator};
-use crate::backend::{BackendError, RunOutcome, distributed};
+use crate::backend::distributed::{self, FinalState};
+use crate::backend::{BackendError, RunOutcome};
 use crate::run::spec::RunSpec;
 
 /// True when this process is a rank started by an MPI launcher (OpenMPI, MPICH, PMIx).
@@ -20,8 +21,13 @@ pub fn launched_by_mpi() -> bool {
 }
 
 /// Runs `spec` as one rank of the MPI world. `ranks`, when given, must be the world
-/// size. Returns the outcome on rank 0 and `None` on the others.
-pub fn run_rank(spec: &RunSpec, ranks: Option<usize>) -> Result<Option<RunOutcome>, BackendError> {
+/// size. Returns the outcome on rank 0 (with the whole final state if `final_state`
+/// asks for it) and `None` on the others.
+pub fn run_rank(
+    spec: &RunSpec,
+    ranks: Option<usize>,
+    final_state: FinalState,
+) -> Result<Option<RunOutcome>, BackendError> {
     let universe = mpi::initialize()
         .ok_or_else(|| BackendError::Mpi("MPI was already initialised in this process".into()))?;
     let comm = MpiComm {
@@ -35,7 +41,7 @@ pub fn run_rank(spec: &RunSpec, ranks: Option<usize>) -> Result<Option<RunOutcom
             comm.size()
         )));
     }
-    distributed::run(&comm, spec)
+    distributed::run(&comm, spec, final_state)
 }
 
 // The counts round of an exchange or all-gather sends these, as the trait's docs count.

@@ -13,7 +13,9 @@ use crate::run::backend_kind::BackendKind;
 use crate::run::spec::{Method, Observe, PreparedRun, RunSpec};
 use crate::sim::Stepper;
 use crate::sim::event::EventSim;
-use crate::sim::observe::{MissedCollisions, SeriesRecorder, block_end, observe, temperature};
+use crate::sim::observe::{
+    MissedCollisions, SeriesRecorder, StateSums, block_end, observe, temperature,
+};
 use crate::sim::{Particles, Physics, StepCounters};
 use crate::system::machine::LoopSeconds;
 
@@ -72,10 +74,11 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
         threads: 1,
         ranks: 1,
     };
-    let summary = summarize(&prepared, workers, &measured, &particles);
+    let last = StateSums::all(&particles, prepared.scene.physics.gravity);
+    let summary = summarize(&prepared, workers, &measured, &last);
     Ok(RunOutcome {
         summary,
-        final_state: particles,
+        final_state: Some(particles),
     })
 }
 

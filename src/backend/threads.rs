@@ -31,7 +31,7 @@ use crate::sim::grid::{
 use crate::sim::neighbours::{
     DISPLACEMENT_BLOCK, Displacements, PairList, Skin, with_reorder_scratch,
 };
-use crate::sim::observe::{SeriesRecorder, block_end, observe};
+use crate::sim::observe::{SeriesRecorder, StateSums, block_end, observe};
 use crate::sim::pieces::{InTurn, MIN_STREAMING_PIECE, Pieces};
 use crate::sim::prefetch::prefetch;
 use crate::sim::resolve::resolve_contacts;
@@ -124,10 +124,11 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
         threads: threads.get(),
         ranks: 1,
     };
-    let summary = summarize(&prepared, workers, &measured, &particles);
+    let last = StateSums::all(&particles, prepared.scene.physics.gravity);
+    let summary = summarize(&prepared, workers, &measured, &last);
     Ok(RunOutcome {
         summary,
-        final_state: particles,
+        final_state: Some(particles),
     })
 }
 

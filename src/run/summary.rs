@@ -107,7 +107,8 @@ pub struct RunSummary {
     /// the wall).
     #[serde(default)]
     pub max_wall_penetration: f64,
-    /// xxh3-64 of the bits of final x, y, vx, vy in id order: equal hashes, identical states.
+    /// Σ over the disks (mod 2⁶⁴) of xxh3-64 of id and final x, y, vx, vy: equal hashes,
+    /// identical states, in any storage order.
     pub state_hash: String,
     /// `"step"` (time steps of dt) or `"event"` (the exact event-driven reference).
     #[serde(default = "default_method")]

@@ -10,6 +10,7 @@ pub mod collision;
 pub mod counters;
 pub mod engine;
 pub mod event;
+pub mod exact_sum;
 pub mod grid;
 pub mod neighbours;
 pub mod observe;

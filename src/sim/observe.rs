@@ -3,14 +3,17 @@
 //! a run's temperature, pressure and compressibility factor, and the series of
 //! per-block sums they are averaged from (analysed in `stats::observables`).
 //!
-//! Sums run in id order so that they do not depend on storage order or on how
-//! disks were divided among workers.
+//! Every whole-system sum is exact ([`ExactSum`]) and the state hash adds one hash per
+//! disk, so none depends on the order the disks are stored in or on how they were
+//! divided among threads and ranks: a rank sums its own disks ([`StateSums`]) and the
+//! ranks' sums merge into the serial run's bits.
 
-use xxhash_rust::xxh3::Xxh3;
+use xxhash_rust::xxh3::xxh3_64;
 
 use super::cells::{CellList, NONE};
 use super::counters::StepCounters;
 use super::event::contact_wait;
+use super::exact_sum::{EXACT_SUM_WORDS, ExactSum};
 use super::particles::Particles;
 use super::scene::{Domain, Physics};
 
@@ -24,34 +27,147 @@ pub struct Observables {
 }
 
 pub fn observe(particles: &Particles) -> Observables {
-    let mut kinetic_energy = 0.0;
-    let mut momentum = [0.0, 0.0];
-    // Fixed order (by id): floating-point sums are not associative.
-    particles.for_each_in_id_order(|idx| {
-        let (m, vx, vy) = (particles.mass[idx], particles.vx[idx], particles.vy[idx]);
-        kinetic_energy += 0.5 * m * (vx * vx + vy * vy);
-        momentum[0] += m * vx;
-        momentum[1] += m * vy;
-    });
-    Observables {
-        kinetic_energy,
-        momentum,
+    let mut sums = StateSums::default();
+    for idx in 0..particles.len() {
+        sums.add_motion(particles, idx);
     }
+    sums.observables()
 }
 
 /// The potential energy of the disks in the constant field `gravity`, −Σ m g·x (zero
-/// at the box's lower left corner), summed in id order; 0 without a field. With the
-/// kinetic energy it makes the total that an elastic scene with gravity conserves.
+/// at the box's lower left corner); 0 without a field. With the kinetic energy it makes
+/// the total that an elastic scene with gravity conserves.
 pub fn potential_energy(particles: &Particles, gravity: Option<[f64; 2]>) -> f64 {
-    let Some([gx, gy]) = gravity else {
-        return 0.0;
-    };
-    let mut energy = 0.0;
-    // Fixed order (by id): floating-point sums are not associative.
-    particles.for_each_in_id_order(|idx| {
-        energy -= particles.mass[idx] * (gx * particles.x[idx] + gy * particles.y[idx]);
-    });
-    energy
+    StateSums::all(particles, gravity).potential.value()
+}
+
+/// The exact sums over some disks that whole-system figures come from, to be merged
+/// with other disks' sums in any order: a rank's own disks, or all of them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StateSums {
+    pub disks: u64,
+    kinetic: ExactSum,
+    momentum: [ExactSum; 2],
+    /// −Σ m g·x in the field the sums were taken in (0 without one).
+    potential: ExactSum,
+    /// Σ (wrapping) of each disk's hash of its id and exact x, y, vx, vy.
+    hash: u64,
+    pub max_radius: f64,
+}
+
+/// Values of [`StateSums::to_words`].
+pub const STATE_SUMS_WORDS: usize = 4 * EXACT_SUM_WORDS + 4;
+
+impl StateSums {
+    /// The sums over the disks stored at `disks`, with the potential energy in `gravity`.
+    pub fn of(
+        particles: &Particles,
+        disks: std::ops::Range<usize>,
+        gravity: Option<[f64; 2]>,
+    ) -> StateSums {
+        let mut sums = StateSums {
+            disks: disks.len() as u64,
+            ..StateSums::default()
+        };
+        for idx in disks {
+            sums.add_motion(particles, idx);
+            let (m, x, y) = (particles.mass[idx], particles.x[idx], particles.y[idx]);
+            let (vx, vy) = (particles.vx[idx], particles.vy[idx]);
+            if let Some([gx, gy]) = gravity {
+                sums.potential.add(-(m * (gx * x + gy * y)));
+            }
+            sums.hash = sums
+                .hash
+                .wrapping_add(disk_hash(particles.id[idx], [x, y, vx, vy]));
+            sums.max_radius = sums.max_radius.max(particles.radius[idx]);
+        }
+        sums
+    }
+
+    /// The sums over every disk.
+    pub fn all(particles: &Particles, gravity: Option<[f64; 2]>) -> StateSums {
+        StateSums::of(particles, 0..particles.len(), gravity)
+    }
+
+    /// Adds the kinetic energy and momentum of the disk stored at `idx`.
+    #[inline]
+    fn add_motion(&mut self, particles: &Particles, idx: usize) {
+        let (m, vx, vy) = (particles.mass[idx], particles.vx[idx], particles.vy[idx]);
+        self.kinetic.add(0.5 * m * (vx * vx + vy * vy));
+        self.momentum[0].add(m * vx);
+        self.momentum[1].add(m * vy);
+    }
+
+    /// Adds the sums of other disks.
+    pub fn merge(&mut self, other: &StateSums) {
+        self.disks += other.disks;
+        self.kinetic.merge(&other.kinetic);
+        self.momentum[0].merge(&other.momentum[0]);
+        self.momentum[1].merge(&other.momentum[1]);
+        self.potential.merge(&other.potential);
+        self.hash = self.hash.wrapping_add(other.hash);
+        self.max_radius = self.max_radius.max(other.max_radius);
+    }
+
+    pub fn observables(&self) -> Observables {
+        Observables {
+            kinetic_energy: self.kinetic.value(),
+            momentum: [self.momentum[0].value(), self.momentum[1].value()],
+        }
+    }
+
+    pub fn potential_energy(&self) -> f64 {
+        self.potential.value()
+    }
+
+    /// The state hash: equal hashes mean bitwise-identical states.
+    pub fn state_hash(&self) -> String {
+        format!("{:016x}", self.hash)
+    }
+
+    /// The sums as [`STATE_SUMS_WORDS`] exact `f64`s, to send between ranks.
+    pub fn to_words(&self) -> Vec<f64> {
+        let mut words = Vec::with_capacity(STATE_SUMS_WORDS);
+        for sum in [
+            &self.kinetic,
+            &self.momentum[0],
+            &self.momentum[1],
+            &self.potential,
+        ] {
+            words.extend(sum.to_words());
+        }
+        // Counts below 2⁵³ and the hash in halves of 32 bits: exact as f64.
+        words.extend([
+            self.disks as f64,
+            (self.hash >> 32) as f64,
+            (self.hash & 0xffff_ffff) as f64,
+            self.max_radius,
+        ]);
+        words
+    }
+
+    pub fn from_words(words: &[f64]) -> StateSums {
+        let sum = |k: usize| ExactSum::from_words(&words[k * EXACT_SUM_WORDS..]);
+        let rest = &words[4 * EXACT_SUM_WORDS..];
+        StateSums {
+            kinetic: sum(0),
+            momentum: [sum(1), sum(2)],
+            potential: sum(3),
+            disks: rest[0] as u64,
+            hash: ((rest[1] as u64) << 32) | rest[2] as u64,
+            max_radius: rest[3],
+        }
+    }
+}
+
+/// xxh3-64 of a disk's id and the exact bits of its x, y, vx, vy (little-endian).
+fn disk_hash(id: u32, state: [f64; 4]) -> u64 {
+    let mut bytes = [0u8; 36];
+    bytes[..4].copy_from_slice(&id.to_le_bytes());
+    for (k, value) in state.iter().enumerate() {
+        bytes[4 + 8 * k..12 + 8 * k].copy_from_slice(&value.to_le_bytes());
+    }
+    xxh3_64(&bytes)
 }
 
 /// The temperature of a state in 2D (k_B = 1): kinetic energy per disk.
@@ -189,21 +305,10 @@ impl SeriesRecorder {
     }
 }
 
-/// Hex xxh3-64 of the exact bits of x, y, vx, vy of every disk in id order
-/// (little-endian). Equal hashes mean bitwise-identical states.
+/// The state hash of every disk (see [`StateSums::state_hash`]): equal hashes mean
+/// bitwise-identical states, whatever order the disks are stored in.
 pub fn state_hash(particles: &Particles) -> String {
-    let mut hasher = Xxh3::new();
-    particles.for_each_in_id_order(|idx| {
-        for value in [
-            particles.x[idx],
-            particles.y[idx],
-            particles.vx[idx],
-            particles.vy[idx],
-        ] {
-            hasher.update(&value.to_le_bytes());
-        }
-    });
-    format!("{:016x}", hasher.digest())
+    StateSums::all(particles, None).state_hash()
 }
 
 /// Counts the collisions the time-stepped method misses, exactly: a pair not touching at
@@ -285,5 +390,57 @@ impl MissedCollisions {
             .iter()
             .filter(|key| self.resolved.binary_search(key).is_err())
             .count() as u64;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::scene::GasSpec;
+
+    fn figures(sums: &StateSums) -> ([u64; 4], String) {
+        let o = sums.observables();
+        let bits = [
+            o.kinetic_energy,
+            o.momentum[0],
+            o.momentum[1],
+            sums.potential_energy(),
+        ];
+        (bits.map(f64::to_bits), sums.state_hash())
+    }
+
+    /// The figures of a state do not depend on the order its disks are stored in, nor on
+    /// how they were divided (as among ranks, each summing its own and sending the sums).
+    #[test]
+    fn figures_and_hash_are_the_same_in_any_storage_order_and_any_division() {
+        let mut particles = GasSpec::unit(500, 0.3).build().unwrap().particles;
+        let gravity = Some([0.0, -0.1]);
+        let whole = StateSums::all(&particles, gravity);
+        let reversed: Vec<u32> = (0..particles.len() as u32).rev().collect();
+        particles.reorder(&reversed);
+        assert_eq!(
+            figures(&StateSums::all(&particles, gravity)),
+            figures(&whole)
+        );
+        for cut in [0, 1, 250, 499] {
+            let mut divided = StateSums::of(&particles, cut..particles.len(), gravity);
+            let sent = StateSums::of(&particles, 0..cut, gravity).to_words();
+            assert_eq!(sent.len(), STATE_SUMS_WORDS);
+            divided.merge(&StateSums::from_words(&sent));
+            assert_eq!(figures(&divided), figures(&whole), "cut at {cut}");
+            assert_eq!(divided.disks, 500);
+        }
+    }
+
+    #[test]
+    fn the_hash_tells_apart_states_one_bit_apart() {
+        let mut particles = GasSpec::unit(100, 0.3).build().unwrap().particles;
+        let before = state_hash(&particles);
+        particles.vx[37] = f64::from_bits(particles.vx[37].to_bits() ^ 1);
+        assert_ne!(state_hash(&particles), before);
+        // The same numbers on swapped disks are another state.
+        particles.vx[37] = f64::from_bits(particles.vx[37].to_bits() ^ 1);
+        particles.vx.swap(3, 4);
+        assert_ne!(state_hash(&particles), before);
     }
 }

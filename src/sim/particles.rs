@@ -464,13 +464,6 @@ pub const SPARE_SHARE: usize = 16;
 /// Values per disk in a packed buffer ([`Particles::pack`]).
 pub const PACKED_LEN: usize = 7;
 
-/// Disks up to which [`Particles::for_each_in_id_order`] indexes every id at once
-/// (4 MB of index).
-const WHOLE_ID_INDEX_MAX: usize = 1 << 20;
-
-/// Blocks of ids [`Particles::for_each_in_id_order`] indexes one at a time beyond.
-const ID_INDEX_BLOCKS: usize = 4;
-
 /// What the per-disk half of a step changes and reads: positions and velocities
 /// (mutable) and radii, as equal-length slices of a run of disks.
 #[derive(Debug)]
@@ -579,46 +572,6 @@ impl Particles {
             vy: self.vy[idx],
             radius: self.radius[idx],
             mass: self.mass[idx],
-        }
-    }
-
-    /// Calls `visit` with the storage index of every disk, in id order.
-    ///
-    /// Up to [`WHOLE_ID_INDEX_MAX`] disks this goes through [`Self::storage_index_by_id`];
-    /// beyond, through an index of a quarter of the ids at a time (four scans of the ids,
-    /// a byte per disk held instead of four). Observing runs while a stepper holds its
-    /// lists, so this index would otherwise be the peak of a large run's memory. Small
-    /// scenes keep the plain index: one block of every id, with its range test per
-    /// disk, made the CI check's small serial run (2,000 disks, 50 steps) 1.4% more
-    /// instructions (28.85 M → 29.26 M, callgrind). Always inlined, so that `visit` is
-    /// inlined into the loop: left to the compiler, an unrelated change elsewhere in the
-    /// crate once made it a call per disk (the same run 29.28 M → 30.58 M instructions).
-    #[inline(always)]
-    pub fn for_each_in_id_order(&self, mut visit: impl FnMut(usize)) {
-        let n = self.len();
-        if n <= WHOLE_ID_INDEX_MAX {
-            for idx in self.storage_index_by_id() {
-                visit(idx as usize);
-            }
-        } else {
-            self.for_each_in_id_blocks(n.div_ceil(ID_INDEX_BLOCKS), visit);
-        }
-    }
-
-    /// [`Self::for_each_in_id_order`] through an index of `block` ids at a time.
-    fn for_each_in_id_blocks(&self, block: usize, mut visit: impl FnMut(usize)) {
-        let n = self.len();
-        let mut index = vec![0u32; block.min(n)];
-        for first in (0..n).step_by(block) {
-            let ids = first as u32..(first + block).min(n) as u32;
-            for (idx, &id) in self.id.iter().enumerate() {
-                if ids.contains(&id) {
-                    index[(id - ids.start) as usize] = idx as u32;
-                }
-            }
-            for &idx in &index[..ids.len()] {
-                visit(idx as usize);
-            }
         }
     }
 
@@ -1046,26 +999,6 @@ mod tests {
                 in_place.store_in_order(scratch, reach, &Backwards(pieces));
                 assert_eq!(in_place, gathered, "unequal disks: {unequal}");
             }
-        }
-    }
-
-    /// Visiting in id order a block of ids at a time gives the order of the whole index,
-    /// whatever the block (a whole block, one id, blocks that do not divide the disks).
-    #[test]
-    fn visits_in_id_order_by_blocks_as_through_the_whole_index() {
-        let disks: Vec<Disk> = (0..10).map(|k| disk(k as f64, 0.5)).collect();
-        let mut particles = Particles::from_disks(&disks);
-        particles.reorder(&[7, 2, 9, 0, 4, 8, 1, 6, 3, 5]);
-        let whole: Vec<usize> = particles
-            .storage_index_by_id()
-            .into_iter()
-            .map(|idx| idx as usize)
-            .collect();
-        assert_eq!(whole[0], 3, "disk 0 is stored at 3 after the reorder");
-        for block in [10, 1, 3, 4, 7] {
-            let mut visited = Vec::new();
-            particles.for_each_in_id_blocks(block, |idx| visited.push(idx));
-            assert_eq!(visited, whole, "blocks of {block} ids");
         }
     }
 }
