@@ -27,7 +27,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
     let mut prepared = spec.prepare()?;
     let mut particles = prepared.take_particles();
     let initial = observe(&particles);
-    let mut curve = Curve::new(&particles, &prepared.scene.physics);
+    let mut curve = Curve::new(&particles, initial.kinetic_energy, &prepared.scene.physics);
     let mut offscreen = Offscreen::when(spec.method.draw, &prepared.scene.domain, &particles);
     let mut stages = StageSeconds::default();
     let (setup_s, seconds, counters, mut accuracy) = match prepared.method {
@@ -186,10 +186,12 @@ struct Curve {
 }
 
 impl Curve {
-    fn new(particles: &Particles, physics: &Physics) -> Curve {
+    /// Starts the curve and the series at t = 0, with the state's `kinetic_energy`.
+    fn new(particles: &Particles, kinetic_energy: f64, physics: &Physics) -> Curve {
+        let temperature = kinetic_energy / particles.len().max(1) as f64;
         Curve {
-            points: (!physics.is_elastic()).then(|| vec![[0.0, temperature(particles)]]),
-            series: SeriesRecorder::new(observe(particles).kinetic_energy, physics),
+            points: (!physics.is_elastic()).then(|| vec![[0.0, temperature]]),
+            series: SeriesRecorder::new(kinetic_energy, physics),
             seconds: 0.0,
         }
     }

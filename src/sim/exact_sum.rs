@@ -10,12 +10,12 @@
 //! [`ExactSum::value`] rounds, once, to the nearest `f64`.
 
 /// Chunks of 32 bits from 2⁻¹⁰⁷⁴: the highest significand bit of the largest finite
-/// `f64` is bit 2,097; one chunk more takes the carries of very long sums.
+/// `f64` is bit 2,097, in chunk 65; one chunk more takes the carries of long sums.
 const CHUNKS: usize = 67;
 
-/// Additions a chunk takes before its carries must be pushed up: each adds less than
-/// 2³² in size to an `i64`.
-const ADDS_BEFORE_CARRY: u32 = 1 << 30;
+/// Additions a chunk takes before its carries must be pushed up: each adds at most 2⁵³
+/// in size to an `i64`, which holds 2⁶³.
+const ADDS_BEFORE_CARRY: u32 = 256;
 
 /// The exact sum of the `f64`s added to it.
 #[derive(Clone, Debug, PartialEq)]
@@ -50,29 +50,23 @@ impl ExactSum {
             self.non_finite += value;
             return;
         }
-        let fraction = bits & ((1 << 52) - 1);
-        // value = significand · 2^(lowest − 1074); subnormals share the lowest exponent.
-        let (significand, lowest) = match exponent {
-            0 => (fraction, 0),
-            _ => (fraction | (1 << 52), exponent - 1),
-        };
-        if significand == 0 {
-            return;
-        }
+        // value = ±significand · 2^(lowest − 1074); subnormals share the lowest exponent.
+        let normal = usize::from(exponent != 0);
+        let significand = (bits & ((1 << 52) - 1)) | ((normal as u64) << 52);
+        let lowest = exponent - normal;
+        let (first, shift) = (lowest / 32, lowest % 32);
+        // The significand shifted into place spans two chunks: its low 32 bits in the
+        // first (the shift may drop bits above them, which the second takes), the rest
+        // (at most 53 bits) in the second.
+        let low = ((significand << shift) & 0xffff_ffff) as i64;
+        let high = (significand >> (32 - shift)) as i64;
+        // 0 for a positive value, −1 for a negative one: x ^ sign − sign is then ±x.
+        let sign = -((bits >> 63) as i64);
+        self.chunks[first] += (low ^ sign) - sign;
+        self.chunks[first + 1] += (high ^ sign) - sign;
+        self.pending += 1;
         if self.pending == ADDS_BEFORE_CARRY {
             self.carry();
-        }
-        self.pending += 1;
-        let shifted = (significand as u128) << (lowest % 32);
-        let pieces = [
-            (shifted & 0xffff_ffff) as i64,
-            ((shifted >> 32) & 0xffff_ffff) as i64,
-            (shifted >> 64) as i64,
-        ];
-        let first = lowest / 32;
-        let negative = bits >> 63 == 1;
-        for (chunk, piece) in self.chunks[first..first + 3].iter_mut().zip(pieces) {
-            *chunk += if negative { -piece } else { piece };
         }
     }
 
