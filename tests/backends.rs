@@ -2,6 +2,8 @@
 
 use std::num::NonZeroUsize;
 
+use collide::backend::comm::ThreadComm;
+use collide::backend::distributed::{self, FinalState};
 use collide::backend::{serial, threads};
 use collide::run::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
 use collide::run::summary::RunSummary;
@@ -66,6 +68,39 @@ fn rayon_at_1_2_3_4_and_8_threads_gives_the_serial_hash() {
             );
             assert_eq!(summary.equilibrated, reference.equilibrated, "{name}");
             assert_eq!((summary.threads, summary.ranks), (n, 1));
+        }
+    }
+}
+
+/// Each rank records its share of the block series (its counters, the exact kinetic
+/// energy of its own disks) and rank 0 merges the shares after the run: the same blocks,
+/// cut and error bars as the serial run's.
+#[test]
+fn ranks_as_threads_give_the_serial_observables() {
+    for (name, spec) in scenes() {
+        let reference = serial::run(&spec).unwrap().summary;
+        for ranks in [1, 2, 3] {
+            let spec = &spec;
+            let summary = std::thread::scope(|scope| {
+                let handles: Vec<_> = ThreadComm::group(ranks)
+                    .into_iter()
+                    .map(|comm| {
+                        scope.spawn(move || distributed::run(&comm, spec, FinalState::Summed))
+                    })
+                    .collect();
+                let mut outcomes = handles.into_iter().map(|h| h.join().unwrap().unwrap());
+                outcomes.next().unwrap().unwrap().summary
+            });
+            assert_eq!(
+                summary.state_hash, reference.state_hash,
+                "{name}, {ranks} ranks"
+            );
+            assert_eq!(
+                observable_bits(&summary),
+                observable_bits(&reference),
+                "{name}, {ranks} ranks: the observables from the block series"
+            );
+            assert_eq!(summary.equilibrated, reference.equilibrated, "{name}");
         }
     }
 }

@@ -28,11 +28,14 @@ use crate::backend::{
 };
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
+use crate::sim::exact_sum::{EXACT_SUM_WORDS, ExactSum};
 use crate::sim::grid::{
     Contact, Mover, StripGrid, StripLayout, receive_band, refresh_band, sort_movers,
 };
 use crate::sim::neighbours::{PairList, Skin, with_reorder_scratch};
-use crate::sim::observe::{Observables, StateSums, observe};
+use crate::sim::observe::{
+    Block, Observables, SeriesRecorder, StateSums, block_end, kinetic_of, observe,
+};
 use crate::sim::particles::{PACKED_LEN, SPARE_SHARE};
 use crate::sim::pieces::InTurn;
 use crate::sim::resolve::resolve_contacts;
@@ -71,11 +74,17 @@ pub fn run<C: Communicator>(
     // What the stepping loop sends: set-up and the reductions below are not counted,
     // as they are not timed.
     let sent_before = comm.traffic();
-    let seconds = step_loop(prepared.steps, spec.slowdown, CpuScope::Thread, |_| {
-        rank.step(comm, prepared.params.dt);
+    let (steps, dt) = (prepared.steps, prepared.params.dt);
+    let mut series = RankSeries::new(&prepared.scene.physics, initial.kinetic_energy);
+    let seconds = step_loop(steps, spec.slowdown, CpuScope::Thread, |step| {
+        rank.step(comm, dt);
+        if let Some(time) = block_end(step, steps, dt) {
+            series.close_block(time, &rank, comm.rank() == 0);
+        }
         ControlFlow::Continue(())
     });
     let sent = comm.traffic().since(&sent_before);
+    let series_parts = series.gather_on_first(comm);
 
     // Each rank sums its own disks; the sums merge exactly, in any order, into the
     // serial run's figures and state hash. The disks themselves go to rank 0 only when
@@ -97,6 +106,7 @@ pub fn run<C: Communicator>(
         last.merge(&StateSums::from_words(&figures[RANK_FIGURES..]));
     }
     let mut measured = merge_figures(&all_figures, rank.shared_counters, setup_s, initial);
+    measured.accuracy.series = Some(series.merged(&series_parts));
     measured.balance = (rank.steps > 0).then(|| Balance {
         imbalance: rank.busiest_share_sum / rank.steps as f64,
         recuts: rank.recuts,
@@ -116,6 +126,86 @@ pub fn run<C: Communicator>(
             whole
         }),
     }))
+}
+
+/// A rank's share of the run's block series: at each block's end its running counters
+/// (with the shared chains' on rank 0, which counts them) and, where the series reads
+/// the kinetic energy, the exact sum over its own disks. Rank 0 merges the ranks' shares
+/// into the serial run's blocks, bit for bit, after the loop: no message in a step.
+struct RankSeries {
+    recorder: SeriesRecorder,
+    /// Per block: its end, the counters' pair and wall collisions and virial, and the
+    /// kinetic energy's exact sum ([`EXACT_SUM_WORDS`]) if the recorder reads it.
+    values: Vec<f64>,
+}
+
+/// Values of [`RankSeries`] per block before the kinetic energy.
+const BLOCK_COUNTS: usize = 4;
+
+impl RankSeries {
+    fn new(physics: &crate::sim::Physics, initial_kinetic_energy: f64) -> RankSeries {
+        RankSeries {
+            recorder: SeriesRecorder::new(initial_kinetic_energy, physics),
+            values: Vec::new(),
+        }
+    }
+
+    fn block_len(&self) -> usize {
+        BLOCK_COUNTS
+            + if self.recorder.reads_energy() {
+                EXACT_SUM_WORDS
+            } else {
+                0
+            }
+    }
+
+    fn close_block(&mut self, time: f64, rank: &RankState, counts_shared: bool) {
+        let mut counters = rank.counters;
+        if counts_shared {
+            counters.merge(&rank.shared_counters);
+        }
+        // Counts below 2⁵³: exact as f64.
+        self.values.extend([
+            time,
+            counters.pair_collisions as f64,
+            counters.wall_collisions as f64,
+            counters.virial,
+        ]);
+        if self.recorder.reads_energy() {
+            let own = 0..rank.n_own;
+            let sum: ExactSum = own.map(|idx| kinetic_of(&rank.particles, idx)).collect();
+            self.values.extend(sum.to_words());
+        }
+    }
+
+    /// Every rank's values on rank 0, in rank order (all ranks call this together).
+    fn gather_on_first<C: Communicator>(&self, comm: &C) -> Vec<Vec<f64>> {
+        let mut to_first = vec![Vec::new(); comm.size()];
+        to_first[0].clone_from(&self.values);
+        comm.exchange(&to_first)
+    }
+
+    /// The run's blocks from every rank's values.
+    fn merged(mut self, parts: &[Vec<f64>]) -> Vec<Block> {
+        let len = self.block_len();
+        for block in 0..self.values.len() / len {
+            let span = block * len..(block + 1) * len;
+            let mut counters = StepCounters::default();
+            let mut kinetic = ExactSum::default();
+            for values in parts.iter().map(|part| &part[span.clone()]) {
+                counters.pair_collisions += values[1] as u64;
+                counters.wall_collisions += values[2] as u64;
+                counters.virial += values[3];
+                if len > BLOCK_COUNTS {
+                    kinetic.merge(&ExactSum::from_words(&values[BLOCK_COUNTS..]));
+                }
+            }
+            let time = self.values[span.start];
+            self.recorder
+                .close_block_with(time, &counters, || kinetic.value());
+        }
+        self.recorder.blocks()
+    }
 }
 
 /// Whether a distributed run sends its whole final state to rank 0 (`--dump`), or

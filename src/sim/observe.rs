@@ -55,7 +55,7 @@ fn potential_of(particles: &Particles, idx: usize, [gx, gy]: [f64; 2]) -> f64 {
 
 /// ½ m v² of the disk stored at `idx`.
 #[inline]
-fn kinetic_of(particles: &Particles, idx: usize) -> f64 {
+pub fn kinetic_of(particles: &Particles, idx: usize) -> f64 {
     let (vx, vy) = (particles.vx[idx], particles.vy[idx]);
     0.5 * particles.mass[idx] * (vx * vx + vy * vy)
 }
@@ -311,8 +311,24 @@ impl SeriesRecorder {
 
     /// Closes the block that ends at `time` with the running `counters` and state.
     pub fn close_block(&mut self, time: f64, counters: &StepCounters, particles: &Particles) {
+        self.close_block_with(time, counters, || kinetic_energy(particles));
+    }
+
+    /// Whether each block's end reads the kinetic energy.
+    pub fn reads_energy(&self) -> bool {
+        self.reads_energy
+    }
+
+    /// Closes the block that ends at `time` with the running `counters`; `kinetic_energy`
+    /// gives the state's, called only if [`Self::reads_energy`].
+    pub fn close_block_with(
+        &mut self,
+        time: f64,
+        counters: &StepCounters,
+        kinetic_energy: impl FnOnce() -> f64,
+    ) {
         let kinetic_energy = match self.reads_energy {
-            true => kinetic_energy(particles),
+            true => kinetic_energy(),
             false => self.kinetic_energy,
         };
         let duration = time - self.start;
