@@ -4,8 +4,10 @@
 //! T(N, P) = c(N/P)·(N/P)·ι·s·(1 + σ·√(2 ln P)) + m(N/P, P)·α + b(N/P, P)·β + k·⌈log₂ P⌉·r
 //!
 //! with c the measured compute cost per disk-step (serial and 1-rank runs; a power law
-//! in the disks per process, held at its measured ends outside them), σ the repetitions'
-//! spread standing in for per-step jitter, ι the measured load imbalance, s the ranks
+//! in the disks per process, held at its measured ends outside them), σ the per-step
+//! jitter (the expected slowest of P ranks is μ(1 + σ√(2 ln P))), inferred from the time
+//! the MPI runs waited beyond what the network explains, with the repetitions' spread
+//! as the band's low end, ι the measured load imbalance, s the ranks
 //! per usable CPU where the runs shared CPUs (1 in a prediction), m and b the messages
 //! and bytes the busiest rank sent per step (power laws in N/P and P fitted to the MPI
 //! records; m without the all-reduces' rounds), k the collectives per step, and α, β,
@@ -196,6 +198,8 @@ struct Config {
     spread: f64,
     messages: f64,
     bytes: f64,
+    /// Median seconds per step in communication, waiting included (the slowest rank's).
+    communication_s: f64,
     collectives: f64,
     imbalance: f64,
     /// Ranks per CPU the study could use, at least 1.
@@ -248,6 +252,7 @@ fn configs(records: &[Record]) -> Vec<Config> {
                 spread,
                 messages: mid(|r| r.messages_per_step_max),
                 bytes: mid(|r| r.bytes_per_step_max),
+                communication_s: mid(|r| r.communication_s / r.steps as f64),
                 collectives: mid(|r| r.collectives_per_step),
                 imbalance: mid(|r| r.load_imbalance),
                 share: (ranks as f64 / usable as f64).max(1.0),
@@ -270,8 +275,10 @@ pub struct Model {
     pub compute_range: (f64, f64),
     /// The least and most measured compute cost over the fitted one.
     pub compute_spread: (f64, f64),
-    /// The repetitions' mean coefficient of variation of a run's time per step.
-    pub jitter: f64,
+    /// Per-step jitter σ: the band's low end (the repetitions' mean coefficient of
+    /// variation of a run's time per step) and its middle and high end (inferred from the
+    /// MPI runs' waiting).
+    pub jitter: (f64, f64),
     /// Point-to-point messages the busiest rank sent per step (all-reduce rounds taken off).
     pub messages: PowerLaw,
     /// Bytes the busiest rank sent per step.
@@ -288,6 +295,7 @@ pub struct Model {
 struct Corner {
     compute: f64,
     imbalance: f64,
+    jitter: f64,
     link: Link,
     shift_messages: f64,
     shift_bytes: f64,
@@ -296,7 +304,7 @@ struct Corner {
 impl Model {
     /// Fits the model to `configs`; `None` without a serial or 1-rank run, or without an
     /// MPI run of 2 ranks or more.
-    fn fit(configs: &[Config]) -> Option<Model> {
+    fn fit(configs: &[Config], link: Link) -> Option<Model> {
         let single: Vec<&Config> = configs.iter().filter(|c| c.ranks == 1.0).collect();
         let costs: Vec<(f64, f64, f64)> =
             single.iter().map(|c| (c.n, 1.0, c.step_s / c.n)).collect();
@@ -334,33 +342,61 @@ impl Model {
                 (imbalance[0], mid, imbalance[imbalance.len() - 1])
             }
         };
-        Some(Model {
+        let mut model = Model {
             compute,
             compute_range: min_max(single.iter().map(|c| c.n)),
             compute_spread: min_max(ratios.into_iter()),
-            jitter: mean(single.iter().map(|c| c.spread)).unwrap_or(0.0),
+            jitter: (0.0, 0.0),
             messages,
             bytes,
             collectives,
             imbalance,
             largest_ranks: many.iter().map(|c| c.ranks).fold(1.0, f64::max),
-        })
+        };
+        let repetitions = mean(single.iter().map(|c| c.spread)).unwrap_or(0.0);
+        // A rank that waits beyond the network's time waits for the slowest rank: that
+        // wait is μσ√(2 ln P), μ the compute of a step.
+        let mut waits: Vec<f64> = many
+            .iter()
+            .map(|c| {
+                let compute = model.compute_s(c.n / c.ranks, 1.0) * c.share;
+                let network = model.network_s(c.n / c.ranks, c.ranks, &model.middle(link));
+                (c.communication_s - network).max(0.0) / (compute * (2.0 * c.ranks.ln()).sqrt())
+            })
+            .filter(|sigma| sigma.is_finite())
+            .collect();
+        let inferred = match waits.is_empty() {
+            true => repetitions,
+            false => median(&mut waits).max(repetitions),
+        };
+        model.jitter = (repetitions, inferred);
+        Some(model)
+    }
+
+    /// Seconds of compute of a step of `per_rank` disks on one process, at `factor`
+    /// times the fitted cost per disk-step.
+    fn compute_s(&self, per_rank: f64, factor: f64) -> f64 {
+        let held = per_rank.clamp(self.compute_range.0, self.compute_range.1);
+        self.compute.at(held, 1.0, 0.0) * factor * per_rank
+    }
+
+    /// Seconds of a step's messages and all-reduce rounds at `corner`.
+    fn network_s(&self, per_rank: f64, ranks: f64, corner: &Corner) -> f64 {
+        let link = corner.link;
+        self.messages.at(per_rank, ranks, corner.shift_messages) * link.alpha_s
+            + self.bytes.at(per_rank, ranks, corner.shift_bytes) * link.beta_s_per_byte
+            + self.collectives * rounds(ranks) * link.round_s
     }
 
     /// Seconds of a step of N disks on P ranks, `share` ranks per CPU, at `corner`.
     fn step_s(&self, n: f64, ranks: f64, share: f64, corner: &Corner) -> f64 {
         let per_rank = n / ranks;
-        let held = per_rank.clamp(self.compute_range.0, self.compute_range.1);
-        let compute = self.compute.at(held, 1.0, 0.0) * corner.compute * per_rank;
+        let compute = self.compute_s(per_rank, corner.compute);
         if ranks <= 1.0 {
             return compute;
         }
-        let jitter = 1.0 + self.jitter * (2.0 * ranks.ln()).sqrt();
-        let link = corner.link;
-        compute * corner.imbalance * share * jitter
-            + self.messages.at(per_rank, ranks, corner.shift_messages) * link.alpha_s
-            + self.bytes.at(per_rank, ranks, corner.shift_bytes) * link.beta_s_per_byte
-            + self.collectives * rounds(ranks) * link.round_s
+        let jitter = 1.0 + corner.jitter * (2.0 * ranks.ln()).sqrt();
+        compute * corner.imbalance * share * jitter + self.network_s(per_rank, ranks, corner)
     }
 
     /// The middle of the band on `link`.
@@ -368,24 +404,29 @@ impl Model {
         Corner {
             compute: 1.0,
             imbalance: self.imbalance.1,
+            jitter: self.jitter.1,
             link,
             shift_messages: 0.0,
             shift_bytes: 0.0,
         }
     }
 
-    /// Every end of the band: fast and slow compute, least and most imbalance, the
-    /// network's two ends, the exponents ± 2 standard errors.
+    /// Every end of the band: fast and slow compute, least and most imbalance and
+    /// jitter, the network's two ends, the exponents ± 2 standard errors.
     fn corners(&self, band: &Band) -> Vec<Corner> {
         let mut corners = Vec::new();
         for compute in [self.compute_spread.0, self.compute_spread.1] {
-            for imbalance in [self.imbalance.0, self.imbalance.2] {
+            for (imbalance, jitter) in [
+                (self.imbalance.0, self.jitter.0),
+                (self.imbalance.2, self.jitter.1),
+            ] {
                 for link in [band.fast, band.slow] {
                     for shift_messages in [-BAND_SE, BAND_SE] {
                         for shift_bytes in [-BAND_SE, BAND_SE] {
                             corners.push(Corner {
                                 compute,
                                 imbalance,
+                                jitter,
                                 link,
                                 shift_messages,
                                 shift_bytes,
@@ -525,7 +566,8 @@ pub fn predicted_ranks() -> Vec<u64> {
 /// The prediction of `records` on `network`, or why there is none.
 pub fn predict(records: &[Record], network: &Band) -> Result<Prediction, String> {
     let configs = configs(records);
-    let model = Model::fit(&configs).ok_or_else(|| {
+    let link = mean_link(network);
+    let model = Model::fit(&configs, link).ok_or_else(|| {
         "a prediction needs runs of the step method on 1 process (serial, or MPI with 1 \
          rank) and MPI runs of 2 ranks or more, with their message counts (records of \
          schema version 9 or later); add them to the study (docs/clusters.md, Predicting \
@@ -536,7 +578,7 @@ pub fn predict(records: &[Record], network: &Band) -> Result<Prediction, String>
     let weak_size = mpi.iter().map(|c| c.n / c.ranks).fold(0.0, f64::max);
     let strong_size = mpi.iter().map(|c| c.n).fold(0.0, f64::max);
     let corners = model.corners(network);
-    let middle = model.middle(mean_link(network));
+    let middle = model.middle(link);
     let curve = |scaling: Scaling, size: f64| {
         predicted_ranks()
             .into_iter()
@@ -557,29 +599,29 @@ pub fn predict(records: &[Record], network: &Band) -> Result<Prediction, String>
             })
             .collect()
     };
-    let check = |model: &Model, config: &Config| Checked {
+    let check = |model: &Model, corner: &Corner, config: &Config| Checked {
         n: config.n as u64,
         ranks: config.ranks as u64,
         measured_s: config.step_s,
-        modelled_s: model.step_s(config.n, config.ranks, config.share, &middle),
+        modelled_s: model.step_s(config.n, config.ranks, config.share, corner),
     };
     let training: Vec<Config> = configs
         .iter()
         .filter(|c| c.ranks <= FIT_UP_TO as f64)
         .cloned()
         .collect();
-    let held_out = match Model::fit(&training) {
+    let held_out = match Model::fit(&training, link) {
         Some(early) => configs
             .iter()
             .filter(|c| c.ranks > FIT_UP_TO as f64)
-            .map(|c| check(&early, c))
+            .map(|c| check(&early, &early.middle(link), c))
             .collect(),
         None => Vec::new(),
     };
     Ok(Prediction {
         weak: curve(Scaling::Weak, weak_size),
         strong: curve(Scaling::Strong, strong_size),
-        fitted: mpi.iter().map(|c| check(&model, c)).collect(),
+        fitted: mpi.iter().map(|c| check(&model, &middle, c)).collect(),
         measured: efficiencies(&configs, &model, &middle),
         held_out,
         model,
@@ -635,8 +677,9 @@ pub fn assumptions(prediction: &Prediction) -> Vec<String> {
             model.compute_range.0, model.compute_range.1
         ),
         format!(
-            "jitter: the repetitions' spread ({}) stands in for per-step jitter, growing like √(2 ln P)",
-            percent(model.jitter)
+            "per-step jitter σ {} (from the MPI runs' waiting; low end {}, the repetitions' spread), the slowest of P ranks μ(1 + σ√(2 ln P)): this machine's noise, not a cluster's",
+            percent(model.jitter.1),
+            percent(model.jitter.0)
         ),
         format!(
             "load imbalance as measured ({:.3}–{:.3}), not growing with P",
