@@ -113,7 +113,8 @@ fn calibrate_network(args: &CalibrateArgs) -> anyhow::Result<()> {
         timeout: std::time::Duration::from_secs(600),
     };
     let forwarded: Vec<std::ffi::OsString> = std::env::args_os().skip(1).collect();
-    let measured: Measured = launcher::launch_for(&launch, &forwarded, "measurement")?;
+    let (measured, _): (Measured, String) =
+        launcher::launch_for(&launch, &forwarded, "measurement")?;
     let note = format!(
         "collide calibrate --network: 2 ranks on {} node(s) by {} from {}, {}",
         layout.nodes,

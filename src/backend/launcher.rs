@@ -9,7 +9,7 @@ use std::process::Command;
 use std::time::Duration;
 
 use crate::backend::BackendError;
-use crate::cluster::placement::Layout;
+use crate::cluster::placement::{Layout, mask_warnings, rank_cpus, rank_cpus_column};
 use crate::cluster::render::launch_line;
 use crate::cluster::site::Site;
 use crate::run::summary::RunSummary;
@@ -30,16 +30,22 @@ pub struct Launch {
 /// returns rank 0's summary. A launcher that fails, or outlives the timeout (it is
 /// killed with all its ranks), is an error that quotes the end of its output.
 pub fn launch(launch: &Launch, args: &[OsString]) -> Result<RunSummary, BackendError> {
-    launch_for(launch, args, "summary")
+    let (mut summary, stderr): (RunSummary, String) = launch_for(launch, args, "summary")?;
+    let ranks = rank_cpus(&stderr);
+    for warning in mask_warnings(&ranks) {
+        eprintln!("warning: {warning}");
+    }
+    summary.rank_cpus = (!ranks.is_empty()).then(|| rank_cpus_column(&ranks));
+    Ok(summary)
 }
 
 /// Runs the ranks with `args` and reads rank 0's answer, `what` it is in words, from
-/// the last line of their output (JSON).
+/// the last line of their output (JSON); returns it with the ranks' error output.
 pub fn launch_for<T: serde::de::DeserializeOwned>(
     launch: &Launch,
     args: &[OsString],
     what: &str,
-) -> Result<T, BackendError> {
+) -> Result<(T, String), BackendError> {
     let line = launch_line(&launch.site, launch.layout);
     let shown = line.argv.join(" ");
     let (program, words) = line
@@ -93,12 +99,13 @@ pub fn launch_for<T: serde::de::DeserializeOwned>(
             tail("its output", &stderr)
         )));
     }
-    serde_json::from_str(stdout.lines().last().unwrap_or_default()).map_err(|e| {
+    let answer = serde_json::from_str(stdout.lines().last().unwrap_or_default()).map_err(|e| {
         BackendError::Mpi(format!(
             "rank 0 printed no JSON {what} on its last line ({e}){}",
             tail("its output", &stdout)
         ))
-    })
+    })?;
+    Ok((answer, stderr))
 }
 
 fn running_as_root() -> bool {

@@ -29,6 +29,8 @@ pub fn run_rank(spec: &RunSpec, ranks: Option<usize>) -> Result<Option<RunOutcom
     let comm = MpiComm {
         world: universe.world(),
     };
+    // Each rank steps on one thread; where it may run goes to the launching process.
+    eprintln!("{}", crate::cluster::placement::rank_line(comm.rank(), 1));
     if let Some(asked) = ranks
         && asked != comm.size()
     {

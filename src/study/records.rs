@@ -90,6 +90,8 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     (12, "temperature_se", Fill::F64(f64::NAN)),
     // Version 12 kept the ranks' load imbalance in the JSON summary only.
     (13, "load_imbalance", Fill::F64(f64::NAN)),
+    // Version 12 did not record where each rank ran.
+    (13, "rank_cpus", Fill::Str("")),
 ];
 
 /// What became of one run.
@@ -407,7 +409,7 @@ macro_rules! for_each_column {
                  rustc, profile, features, git_commit, mpi_library, study_started_utc,
                  finished_utc, method <- run, observe <- run, choice <- run,
                  temperature_curve <- run, cpu_affinity, ab_side, scene_hash, job_id,
-                 node_list;
+                 node_list, rank_cpus <- run;
             u64: threads <- run, ranks <- run, workers <- run, n <- run, steps <- run,
                  pair_collisions <- run, wall_collisions <- run, logical_cores, physical_cores,
                  memory_bytes;

@@ -15,7 +15,9 @@ pub const FILE_NAME: &str = "prediction.png";
 
 const SIZE: (u32, u32) = (1000, 760);
 /// Pixels under the plot for the caption.
-const CAPTION_HEIGHT: u32 = 170;
+const CAPTION_HEIGHT: u32 = 190;
+/// Characters of a caption line at most (continuations are indented).
+const CAPTION_CHARS: usize = 140;
 
 pub struct PredictionChart<'a> {
     prediction: &'a Prediction,
@@ -100,17 +102,38 @@ impl<'a> Chart<'a> for PredictionChart<'a> {
                 .label(format!("{name}: model, as the runs ran here"))
                 .legend(move |(x, y)| Cross::new((x + 10, y), 6, colour.stroke_width(2)));
         }
-        draw_legend(&mut chart, SeriesLabelPosition::LowerLeft, 13)?;
-        let style = TextStyle::from((FONT, 14)).color(&BLACK);
-        let lines = std::iter::once("Assumptions:".to_owned())
-            .chain(assumptions(self.prediction).into_iter().map(|a| format!("– {a}")));
+        draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 13)?;
+        let style = TextStyle::from((FONT, 13)).color(&BLACK);
+        let lines = std::iter::once("Assumptions:".to_owned()).chain(
+            assumptions(self.prediction)
+                .into_iter()
+                .flat_map(|a| wrapped(&format!("– {a}"), CAPTION_CHARS)),
+        );
         for (i, line) in lines.enumerate() {
             caption
-                .draw_text(&line, &style, (20, 6 + 20 * i as i32))
+                .draw_text(&line, &style, (20, 4 + 17 * i as i32))
                 .map_err(|e| anyhow!("{e}"))?;
         }
         Ok(())
     }
+}
+
+/// `text` cut at spaces into lines of at most `width` characters (a longer word stays
+/// whole); lines after the first are indented.
+fn wrapped(text: &str, width: usize) -> Vec<String> {
+    let mut lines = vec![String::new()];
+    for word in text.split(' ') {
+        let line = lines.last_mut().expect("lines start with one");
+        if !line.trim().is_empty() && line.chars().count() + 1 + word.chars().count() > width {
+            lines.push(format!("   {word}"));
+        } else {
+            if !line.is_empty() {
+                line.push(' ');
+            }
+            line.push_str(word);
+        }
+    }
+    lines
 }
 
 type Plot<'a, 'b> =
@@ -142,4 +165,15 @@ fn draw_band(
             Rectangle::new([(x, y - 5), (x + 20, y + 5)], colour.mix(0.4).filled())
         });
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::wrapped;
+
+    #[test]
+    fn caption_lines_break_at_spaces_and_continuations_are_indented() {
+        assert_eq!(wrapped("a bb ccc", 4), ["a bb", "   ccc"]);
+        assert_eq!(wrapped("longword x", 4), ["longword", "   x"]);
+    }
 }
