@@ -10,11 +10,13 @@ use crate::backend::{BackendSpec, RunOutcome, serial, threads};
 use crate::check::calibrate;
 use crate::check::{CheckOptions, CheckOutcome};
 use crate::cli::{
-    CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs, ViewArgs,
+    CalibrateArgs, CheckArgs, Cli, Command, RenderArgs, ReportArgs, RunArgs, SimulateArgs, ViewArgs,
 };
+use crate::cluster::network::Band;
+use crate::cluster::site::Site;
 use crate::exit::RunsFailed;
 use crate::report::figures;
-use crate::report::{accuracy, analysis, markdown, tables as results};
+use crate::report::{accuracy, analysis, markdown, prediction, tables as results};
 use crate::run::backend_kind::BackendKind;
 use crate::run::limits::{Machine, WorkerSource, check_memory, check_workers, placement_note};
 use crate::run::scene_file;
@@ -51,7 +53,8 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Render(args) => render_scene(&args),
         Command::View(args) => view_scene(&args),
         Command::Check(args) => return run_check(&args),
-        Command::Calibrate => {
+        Command::Calibrate(args) if args.network => calibrate_network(&args),
+        Command::Calibrate(_) => {
             let seconds = calibrate::workload_seconds();
             let calibration = Calibration {
                 calibration_s: seconds.wall,
@@ -60,8 +63,106 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
             crate::outln!("{}", serde_json::to_string(&calibration)?);
             Ok(())
         }
+        Command::Predict(args) => {
+            let records = results::load(&args.path)?;
+            let band = network_band(args.system.as_deref())?;
+            let predicted = prediction::predict(&records, &band).map_err(|reason| {
+                anyhow::anyhow!("{}: no prediction: {reason}", args.path.display())
+            })?;
+            crate::out!("{}", prediction::markdown(&predicted, None));
+            Ok(())
+        }
     };
     done.map(|()| Outcome::Done)
+}
+
+/// The network band of the site `system` names (its `[network]`, else assumed), or the
+/// assumed band without a site.
+fn network_band(system: Option<&str>) -> anyhow::Result<Band> {
+    Ok(match system {
+        Some(system) => Site::find(system)?.network_band(),
+        None => crate::cluster::network::assumed_band(),
+    })
+}
+
+/// `collide calibrate --network`: as a rank, the ping-pong; otherwise 2 ranks launched
+/// on the site, their measurement fitted and written into the site file's `[network]`
+/// (printed for `local`, which has no file).
+#[cfg(feature = "mpi")]
+fn calibrate_network(args: &CalibrateArgs) -> anyhow::Result<()> {
+    use crate::backend::{launcher, mpi};
+    use crate::cluster::network::{self, Measured};
+    if mpi::launched_by_mpi() {
+        if let Some(measured) = mpi::measure_network()? {
+            crate::outln!("{}", serde_json::to_string(&measured)?);
+        }
+        return Ok(());
+    }
+    let site = Site::find(&args.system)?;
+    let layout = crate::cluster::placement::Layout {
+        nodes: args.nodes.get(),
+        ranks: 2,
+        threads: 1,
+    };
+    layout
+        .check(&site, true)
+        .map_err(|reason| anyhow::anyhow!("--nodes: {reason}"))?;
+    let launch = launcher::Launch {
+        layout,
+        site,
+        timeout: std::time::Duration::from_secs(600),
+    };
+    let forwarded: Vec<std::ffi::OsString> = std::env::args_os().skip(1).collect();
+    let (measured, _): (Measured, String) =
+        launcher::launch_for(&launch, &forwarded, "measurement")?;
+    let note = format!(
+        "collide calibrate --network: 2 ranks on {} node(s) by {} from {}, {}",
+        layout.nodes,
+        launch.site.launcher.name(),
+        crate::study::environment::Environment::capture().hostname,
+        records::utc_now()
+    );
+    let fitted = network::fit(&measured, note)
+        .ok_or_else(|| anyhow::anyhow!("the ping-pong's sizes gave no fit: {measured:?}"))?;
+    crate::outln!("bytes        one-way µs   fitted µs");
+    for sample in &measured.samples {
+        crate::outln!(
+            "{:>9}  {:>12.3}  {:>10.3}",
+            sample.bytes,
+            sample.seconds * 1e6,
+            (fitted.alpha_s + fitted.beta_s_per_byte * sample.bytes) * 1e6
+        );
+    }
+    crate::outln!(
+        "all-reduce of 3 values on 2 ranks: {:.3} µs\n{}\n",
+        measured.allreduce_s * 1e6,
+        fitted.band().label
+    );
+    let table = network::table(&fitted);
+    match Site::file_of(&args.system) {
+        None => crate::outln!(
+            "{table}\nthe `local` site has no file to keep these in: paste them into a site \
+             file (docs/clusters.md) and name it with --system"
+        ),
+        Some(path) => {
+            let text = crate::system::input::read_text(&path, crate::system::input::MAX_TEXT_BYTES)
+                .map_err(|reason| anyhow::anyhow!("cannot read {} ({reason})", path.display()))?;
+            let updated = network::with_table(&text, &table);
+            // What is written must read back as the same site with this network.
+            crate::cluster::site::parse(&path, &updated)?;
+            write_atomically(&path, |file| file.write_all(updated.as_bytes()))?;
+            crate::outln!("{table}\nwritten into {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+#[cfg(not(feature = "mpi"))]
+fn calibrate_network(_: &CalibrateArgs) -> anyhow::Result<()> {
+    bail!(
+        "this collide was built without MPI support; to measure the network, {}",
+        runner::ENABLE_MPI
+    )
 }
 
 fn run_check(args: &CheckArgs) -> anyhow::Result<Outcome> {
@@ -184,7 +285,7 @@ fn write_report(args: &ReportArgs) -> anyhow::Result<()> {
             Path::new("reports").join(study)
         }
     };
-    report_into(&records, &args.path, &out, "--out")
+    report_into(&records, &args.path, &out, "--out", None)
 }
 
 /// The report of a check history folder: its figure and table in `--out` (default
@@ -218,8 +319,16 @@ fn write_history_report(args: &ReportArgs) -> anyhow::Result<()> {
 }
 
 /// Writes the report of `records` (read from `source`) into the folder `out`, which the
-/// option `flag` chose: report.md and its figures; prints where.
-fn report_into(records: &[Record], source: &Path, out: &Path, flag: &str) -> anyhow::Result<()> {
+/// option `flag` chose: report.md and its figures, with a scaling prediction on the
+/// network of the site `system` names (else an assumed one) where the study has MPI
+/// runs; prints where.
+fn report_into(
+    records: &[Record],
+    source: &Path,
+    out: &Path,
+    flag: &str,
+    system: Option<&str>,
+) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| {
         format!(
             "cannot create the report folder {}; choose another with {flag}",
@@ -232,11 +341,13 @@ fn report_into(records: &[Record], source: &Path, out: &Path, flag: &str) -> any
         Some(_) => accuracy::cooling(records),
         None => Vec::new(),
     };
+    let predicted = prediction::predict(records, &network_band(system)?).ok();
     let analysed = figures::Analysed {
         setups: &setups,
         accuracy: groups.as_deref(),
         cooling: &cooling,
         history: None,
+        prediction: predicted.as_ref(),
     };
     let drawn = figures::draw(&analysed, out)?;
     let pictures = markdown::Pictures {
@@ -252,7 +363,11 @@ fn report_into(records: &[Record], source: &Path, out: &Path, flag: &str) -> any
         }),
     };
     let path = out.join("report.md");
-    let text = markdown::markdown(records, &setups, &source.display().to_string(), &pictures);
+    let mut text = markdown::markdown(records, &setups, &source.display().to_string(), &pictures);
+    if let Some(predicted) = &predicted {
+        text += "\n";
+        text += &prediction::markdown(predicted, Some(figures::prediction::FILE_NAME));
+    }
     write_atomically(&path, |file| file.write_all(text.as_bytes()))?;
     crate::outln!(
         "report written to {}, its figures beside it",
@@ -302,7 +417,13 @@ fn run_study(args: &RunArgs) -> anyhow::Result<()> {
             );
         } else {
             crate::outln!();
-            report_into(&records, &outcome.results, &reports, "--reports")?;
+            report_into(
+                &records,
+                &outcome.results,
+                &reports,
+                "--reports",
+                Some(&args.system),
+            )?;
         }
     }
     if outcome.failed > 0 {

@@ -125,9 +125,54 @@ pub enum Command {
     /// (exit 0: nothing regressed, 1: a regression or failed runs, 2: an error).
     #[command(after_help = CHECK_EXAMPLES)]
     Check(CheckArgs),
-    /// Time the fixed calibration workload that `collide check` normalises by.
-    #[command(hide = true)]
-    Calibrate,
+    /// Measure the network between 2 MPI ranks (`--network`: latency and bandwidth from
+    /// a ping-pong, and a small all-reduce) into a site file's `[network]`; without
+    /// `--network`, time the fixed workload that `collide check` normalises by (JSON).
+    #[command(after_help = CALIBRATE_EXAMPLES)]
+    Calibrate(CalibrateArgs),
+    /// Predict weak- and strong-scaling efficiency up to 10,000 ranks from a study's
+    /// records and a site's network, as a band, with the model's error on the measured
+    /// rank counts it was not fitted to.
+    #[command(after_help = PREDICT_EXAMPLES)]
+    Predict(PredictArgs),
+}
+
+const CALIBRATE_EXAMPLES: &str = "\
+Examples:
+  The network of this host (2 ranks under mpirun): the [network] lines to paste
+    collide calibrate --network
+  Measured between 2 nodes of a site and written into its file
+    collide calibrate --network --system slurm-local --nodes 2";
+
+const PREDICT_EXAMPLES: &str = "\
+Examples:
+  A study's prediction on an assumed InfiniBand-class network
+    collide predict results/predict/
+  On the network measured into a site file
+    collide predict results/predict/ --system slurm-local";
+
+#[derive(Debug, Args)]
+pub struct CalibrateArgs {
+    /// Measure the network between 2 MPI ranks instead of timing the workload.
+    #[arg(long)]
+    pub network: bool,
+    /// The site whose launcher starts the 2 ranks, and whose file gets the `[network]`
+    /// table: NAME for systems/NAME.toml or a path (`local`: printed, not written).
+    #[arg(long, value_name = "NAME|PATH", default_value = LOCAL, requires = "network")]
+    pub system: String,
+    /// Nodes to put the 2 ranks on: 2 measures the network between nodes.
+    #[arg(long, default_value_t = NonZeroUsize::MIN, value_parser = parse_workers, allow_negative_numbers = true, requires = "network")]
+    pub nodes: NonZeroUsize,
+}
+
+#[derive(Debug, Args)]
+pub struct PredictArgs {
+    /// A study's results folder (results/NAME/) or one results file.
+    pub path: PathBuf,
+    /// The site whose `[network]` the prediction uses (NAME or path); without one, or
+    /// without the table, an InfiniBand-class network is assumed and said so.
+    #[arg(long, value_name = "NAME|PATH")]
+    pub system: Option<String>,
 }
 
 #[derive(Debug, Args)]

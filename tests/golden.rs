@@ -40,6 +40,8 @@ const ENVIRONMENT: &[&str] = &[
     "physical_cores",
     "usable_cpus",
     "cpu_affinity",
+    // Where each MPI rank ran: hosts and CPU lists.
+    "rank_cpus",
     "memory_bytes",
     "os",
     "rustc",

@@ -64,6 +64,7 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         collectives_per_step: (backend == "mpi").then_some(3.05),
         load_imbalance: (backend == "mpi").then_some(1.02),
         recuts: (backend == "mpi").then_some(0),
+        rank_cpus: None,
         kinetic_energy_initial: 500.0,
         kinetic_energy_final: 500.0,
         momentum_initial: [0.0, 0.0],
@@ -805,4 +806,29 @@ fn the_cooling_chart_compares_each_method_with_haffs_law_and_marks_breakdowns() 
     );
     // Only the large step's deviation is bold.
     assert_eq!(text.matches("%** |").count(), 1, "{text}");
+}
+
+/// The scaling prediction of fixed records: its section names the network it assumed
+/// and the extrapolation factor, and its figure is drawn.
+#[test]
+fn the_prediction_of_an_mpi_study_says_what_it_assumed_and_is_drawn() {
+    use collide::cluster::network::assumed_band;
+    use collide::report::figures::{self, prediction::FILE_NAME};
+    use collide::report::prediction;
+    let records = records();
+    let predicted = prediction::predict(&records, &assumed_band()).unwrap();
+    let text = prediction::markdown(&predicted, Some(FILE_NAME));
+    assert!(text.contains("assumed network (none measured)"), "{text}");
+    assert!(
+        text.contains("10000 predicted ranks / 4 measured = 2500×"),
+        "{text}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let analysed = figures::Analysed {
+        prediction: Some(&predicted),
+        ..Default::default()
+    };
+    let drawn = figures::draw(&analysed, dir.path()).unwrap();
+    assert_eq!(drawn.0.len(), 1);
+    assert!(dir.path().join(FILE_NAME).is_file());
 }

@@ -1,15 +1,15 @@
-//! Starting MPI ranks for `collide simulate --backend mpi --ranks N`: renders the site's
-//! launcher line for the ranks' layout (`mpirun` on this host unless `--system` or
-//! `--launcher` says otherwise: [`crate::cluster::render`]), runs it on this very
-//! binary under a timeout, and reads rank 0's JSON summary from the last line of its
-//! output.
+//! Starting MPI ranks for `collide simulate --backend mpi --ranks N` (and the ping-pong
+//! of `collide calibrate --network`): renders the site's launcher line for the ranks'
+//! layout (`mpirun` on this host unless `--system` or `--launcher` says otherwise:
+//! [`crate::cluster::render`]), runs it on this very binary under a timeout, and reads
+//! rank 0's JSON answer from the last line of its output.
 
 use std::ffi::OsString;
 use std::process::Command;
 use std::time::Duration;
 
 use crate::backend::BackendError;
-use crate::cluster::placement::Layout;
+use crate::cluster::placement::{Layout, mask_warnings, rank_cpus, rank_cpus_column};
 use crate::cluster::render::launch_line;
 use crate::cluster::site::Site;
 use crate::run::summary::RunSummary;
@@ -30,6 +30,22 @@ pub struct Launch {
 /// returns rank 0's summary. A launcher that fails, or outlives the timeout (it is
 /// killed with all its ranks), is an error that quotes the end of its output.
 pub fn launch(launch: &Launch, args: &[OsString]) -> Result<RunSummary, BackendError> {
+    let (mut summary, stderr): (RunSummary, String) = launch_for(launch, args, "summary")?;
+    let ranks = rank_cpus(&stderr);
+    for warning in mask_warnings(&ranks) {
+        eprintln!("warning: {warning}");
+    }
+    summary.rank_cpus = (!ranks.is_empty()).then(|| rank_cpus_column(&ranks));
+    Ok(summary)
+}
+
+/// Runs the ranks with `args` and reads rank 0's answer, `what` it is in words, from
+/// the last line of their output (JSON); returns it with the ranks' error output.
+pub fn launch_for<T: serde::de::DeserializeOwned>(
+    launch: &Launch,
+    args: &[OsString],
+    what: &str,
+) -> Result<(T, String), BackendError> {
     let line = launch_line(&launch.site, launch.layout);
     let shown = line.argv.join(" ");
     let (program, words) = line
@@ -83,12 +99,13 @@ pub fn launch(launch: &Launch, args: &[OsString]) -> Result<RunSummary, BackendE
             tail("its output", &stderr)
         )));
     }
-    RunSummary::from_last_line(&stdout).map_err(|e| {
+    let answer = serde_json::from_str(stdout.lines().last().unwrap_or_default()).map_err(|e| {
         BackendError::Mpi(format!(
-            "rank 0 printed no JSON summary on its last line ({e}){}",
+            "rank 0 printed no JSON {what} on its last line ({e}){}",
             tail("its output", &stdout)
         ))
-    })
+    })?;
+    Ok((answer, stderr))
 }
 
 fn running_as_root() -> bool {

@@ -1,5 +1,6 @@
 //! MPI through rsmpi (feature `mpi`): the [`Communicator`] of the distributed backend,
-//! and one rank's run when collide was started by `mpirun`.
+//! one rank's run when collide was started by `mpirun`, and the ping-pong of `collide
+//! calibrate --network` (its fit is `cluster::network`'s).
 
 use mpi::Count;
 use mpi::collective::SystemOperation;
@@ -11,6 +12,7 @@ use mpi::traits::{Communicator as _, CommunicatorCollectives, Destination, Sourc
 use crate::backend::comm::{COUNT_BYTES, Communicator};
 use crate::backend::distributed::{self, FinalState};
 use crate::backend::{BackendError, RunOutcome};
+use crate::cluster::network::{Measured, SIZES, Sample};
 use crate::run::spec::RunSpec;
 
 /// True when this process is a rank started by an MPI launcher (OpenMPI, MPICH, PMIx).
@@ -33,6 +35,8 @@ pub fn run_rank(
     let comm = MpiComm {
         world: universe.world(),
     };
+    // Each rank steps on one thread; where it may run goes to the launching process.
+    eprintln!("{}", crate::cluster::placement::rank_line(comm.rank(), 1));
     if let Some(asked) = ranks
         && asked != comm.size()
     {
@@ -42,6 +46,73 @@ pub fn run_rank(
         )));
     }
     distributed::run(&comm, spec, final_state)
+}
+
+/// Timed blocks of each size; a size's time is their median (robust to the other
+/// jobs of a shared machine).
+const BLOCKS: usize = 5;
+
+/// Round trips of `bytes` in one timed block: about 2²⁴ bytes each way, 4 to 400.
+fn trips(bytes: usize) -> usize {
+    ((1 << 24) / bytes / BLOCKS).clamp(4, 400)
+}
+
+/// As one of exactly 2 ranks: a ping-pong of each of [`SIZES`] and a small all-reduce
+/// (3 values, as the distributed step's), each timed in [`BLOCKS`] blocks after a
+/// warm-up. Returns what was measured on rank 0, `None` on rank 1.
+pub fn measure_network() -> Result<Option<Measured>, BackendError> {
+    let universe = mpi::initialize()
+        .ok_or_else(|| BackendError::Mpi("MPI was already initialised in this process".into()))?;
+    let world = universe.world();
+    if world.size() != 2 {
+        return Err(BackendError::Mpi(format!(
+            "the network's ping-pong runs on 2 ranks, and the launcher started {}",
+            world.size()
+        )));
+    }
+    let rank = world.rank();
+    let other = world.process_at_rank(1 - rank);
+    // The median of the blocks' seconds per call of `round`, after one block of warm-up.
+    let time = |calls: usize, round: &mut dyn FnMut()| {
+        let mut blocks: Vec<f64> = (0..=BLOCKS)
+            .map(|_| {
+                world.barrier();
+                let start = std::time::Instant::now();
+                (0..calls).for_each(|_| round());
+                start.elapsed().as_secs_f64() / calls as f64
+            })
+            .skip(1)
+            .collect();
+        crate::stats::median(&mut blocks)
+    };
+    let samples = SIZES
+        .iter()
+        .map(|&bytes| {
+            let mut buffer = vec![0u8; bytes];
+            let round_trip = time(trips(bytes), &mut || {
+                if rank == 0 {
+                    other.send(&buffer[..]);
+                    other.receive_into(&mut buffer[..]);
+                } else {
+                    other.receive_into(&mut buffer[..]);
+                    other.send(&buffer[..]);
+                }
+            });
+            Sample {
+                bytes: bytes as f64,
+                seconds: round_trip / 2.0,
+            }
+        })
+        .collect();
+    let values = [1.0_f64; 3];
+    let mut largest = [0.0_f64; 3];
+    let allreduce_s = time(400, &mut || {
+        world.all_reduce_into(&values[..], &mut largest[..], SystemOperation::max());
+    });
+    Ok((rank == 0).then_some(Measured {
+        samples,
+        allreduce_s,
+    }))
 }
 
 // The counts round of an exchange or all-gather sends these, as the trait's docs count.

@@ -3,6 +3,7 @@
 //! threads within its cores unless the user insists.
 
 use crate::cluster::site::Site;
+use crate::system::machine::allowed_cpu_list;
 
 /// A run's ranks and threads on nodes: `ranks` processes spread evenly over `nodes`,
 /// each stepping on `threads` threads.
@@ -103,8 +104,33 @@ pub fn rank_cpus(stderr: &str) -> Vec<RankCpus> {
             })
         })
         .collect();
+    // A rank of a batch job reports twice (its job script's line, then its own): the
+    // first is kept.
     ranks.sort_by_key(|r| r.rank);
+    ranks.dedup_by_key(|r| r.rank);
     ranks
+}
+
+/// The line a rank prints first on its error output, which [`rank_cpus`] reads: its
+/// rank, host, allowed CPUs (`Cpus_allowed_list`) and threads.
+pub fn rank_line(rank: usize, threads: usize) -> String {
+    let cpus = allowed_cpu_list().unwrap_or_else(|| "unknown".to_owned());
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
+    let host = host.trim();
+    format!(
+        "collide-rank: {rank} {} {cpus} {threads}",
+        if host.is_empty() { "unknown" } else { host }
+    )
+}
+
+/// The ranks as the records' `rank_cpus` column writes them, in rank order:
+/// `HOST:CPUS/THREADS` each, joined by `; ` (e.g. `n1:0/1; n1:1/1`).
+pub fn rank_cpus_column(ranks: &[RankCpus]) -> String {
+    ranks
+        .iter()
+        .map(|r| format!("{}:{}/{}", r.host, r.cpus, r.threads))
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// What is wrong with where the ranks ran: ranks on one host allowed the same CPUs
@@ -169,6 +195,7 @@ mod tests {
     #[test]
     fn ranks_say_where_they_ran_and_shared_or_scarce_cpus_are_warned_of() {
         let stderr = "collide-rank: 1 n1 2-3 2\nnoise\ncollide-rank: 0 n1 0-1 2\n\
+                      collide-rank: 0 n1 0-1 1\n\
                       collide-rank: 2 n2 0-1 2\ncollide-rank: 3 n2 1 2\n";
         let ranks = rank_cpus(stderr);
         let order: Vec<(usize, &str, &str)> = ranks
@@ -192,6 +219,8 @@ mod tests {
             ]
         );
         assert!(mask_warnings(&ranks[..2]).is_empty());
+        // Rank 0's first line is kept; the record's column lists the ranks in order.
+        assert_eq!(rank_cpus_column(&ranks[..2]), "n1:0-1/2; n1:2-3/2");
         assert_eq!(cpu_list("0-2,5"), [0, 1, 2, 5]);
     }
 

@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
+use crate::cluster::network::{Band, Network, RawNetwork, Source, assumed_band};
 use crate::run::scene_file::line_of;
 use crate::system::input::{MAX_TEXT_BYTES, read_text};
 
@@ -138,6 +139,8 @@ pub struct Site {
     pub launcher_args: Vec<String>,
     /// Variables set for every rank.
     pub env: BTreeMap<String, String>,
+    /// The network between its nodes, measured or assumed (`[network]`), if given.
+    pub network: Option<Network>,
 }
 
 impl Site {
@@ -157,6 +160,7 @@ impl Site {
             scheduler_args: Vec::new(),
             launcher_args: Vec::new(),
             env: BTreeMap::new(),
+            network: None,
         }
     }
 
@@ -193,15 +197,23 @@ impl Site {
         })
     }
 
+    /// The file `--system` names: none for `local`, a path to a TOML file (it holds a
+    /// `/` or ends in `.toml`), or `systems/NAME.toml`.
+    pub fn file_of(name_or_path: &str) -> Option<PathBuf> {
+        match name_or_path {
+            LOCAL => None,
+            _ if name_or_path.contains('/') || name_or_path.ends_with(".toml") => {
+                Some(PathBuf::from(name_or_path))
+            }
+            _ => Some(Path::new(SYSTEMS_DIR).join(format!("{name_or_path}.toml"))),
+        }
+    }
+
     /// The site `--system` names: `local`, a path to a TOML file (it holds a `/` or ends
     /// in `.toml`), or NAME for `systems/NAME.toml`.
     pub fn find(name_or_path: &str) -> anyhow::Result<Site> {
-        if name_or_path == LOCAL {
+        let Some(path) = Site::file_of(name_or_path) else {
             return Ok(Site::local());
-        }
-        let path = match name_or_path.contains('/') || name_or_path.ends_with(".toml") {
-            true => PathBuf::from(name_or_path),
-            false => Path::new(SYSTEMS_DIR).join(format!("{name_or_path}.toml")),
         };
         let text = read_text(&path, MAX_TEXT_BYTES).map_err(|reason| {
             anyhow::anyhow!(
@@ -211,6 +223,19 @@ impl Site {
             )
         })?;
         Ok(parse(&path, &text)?)
+    }
+
+    /// The network a prediction assumes on this site: its `[network]`, else an assumed
+    /// InfiniBand-class band that says this site has none.
+    pub fn network_band(&self) -> Band {
+        match &self.network {
+            Some(network) => network.band(),
+            None => {
+                let mut band = assumed_band();
+                band.label = format!("{} (site `{}` has no [network])", band.label, self.name);
+                band
+            }
+        }
     }
 
     /// Whether a run started by this site's launcher is itself a batch job.
@@ -246,11 +271,12 @@ struct RawSite {
     launcher_args: Vec<String>,
     #[serde(default)]
     env: BTreeMap<String, Spanned<String>>,
+    network: Option<RawNetwork>,
 }
 
 /// The keys a site file takes, for the error that names an unknown one.
 const KEYS: &str = "scheduler, launcher, launcher_path, cores_per_node, bind, max_nodes, \
-                    partition, account, time_limit, scheduler_args, launcher_args, [env]";
+                    partition, account, time_limit, scheduler_args, launcher_args, [env], [network]";
 
 /// Validates a site file's text; `path` names it in errors and gives the site its name.
 pub fn parse(path: &Path, text: &str) -> Result<Site, SiteError> {
@@ -282,6 +308,11 @@ pub fn parse(path: &Path, text: &str) -> Result<Site, SiteError> {
     };
     file.check_time_limit(raw.time_limit.as_ref())?;
     file.check_env(&raw.env)?;
+    let network = raw
+        .network
+        .as_ref()
+        .map(|network| file.network(network))
+        .transpose()?;
     let mut command: Vec<String> = launcher.name().split(' ').map(str::to_owned).collect();
     if let Some(program) = raw.launcher_path {
         command[0] = program;
@@ -306,6 +337,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Site, SiteError> {
             .into_iter()
             .map(|(key, value)| (key, value.into_inner()))
             .collect(),
+        network,
     })
 }
 
@@ -393,6 +425,43 @@ impl SiteText<'_> {
             )),
             _ => Ok(()),
         }
+    }
+
+    /// The `[network]` table: a source of `measured` or `assumed`, and figures that are
+    /// positive (standard errors: not negative).
+    fn network(&self, raw: &RawNetwork) -> Result<Network, SiteError> {
+        let source = self.choice(&Source::ALL, Source::name, &raw.source, "network.source")?;
+        // A figure must be positive; a standard error (`positive` false) may be 0.
+        let figure = |value: &Spanned<f64>, key: &str, positive: bool| {
+            let v = *value.get_ref();
+            match v.is_finite() && (v > 0.0 || (!positive && v == 0.0)) {
+                true => Ok(v),
+                false => Err(self.invalid(
+                    value.span().start,
+                    format!(
+                        "`network.{key}` is {v}; give {} number of seconds (e.g. 1.5e-6)",
+                        if positive {
+                            "a positive"
+                        } else {
+                            "a non-negative"
+                        }
+                    ),
+                )),
+            }
+        };
+        let optional = |value: &Option<Spanned<f64>>, key: &str, positive: bool| {
+            value.as_ref().map(|v| figure(v, key, positive)).transpose()
+        };
+        Ok(Network {
+            source,
+            alpha_s: figure(&raw.alpha_s, "alpha_s", true)?,
+            beta_s_per_byte: figure(&raw.beta_s_per_byte, "beta_s_per_byte", true)?,
+            allreduce_s: optional(&raw.allreduce_s, "allreduce_s", true)?,
+            alpha_se_s: optional(&raw.alpha_se_s, "alpha_se_s", false)?.unwrap_or(0.0),
+            beta_se_s_per_byte: optional(&raw.beta_se_s_per_byte, "beta_se_s_per_byte", false)?
+                .unwrap_or(0.0),
+            note: raw.note.clone(),
+        })
     }
 
     /// Variables a job script can export as they are: a shell name, a value without a
@@ -501,6 +570,14 @@ mod tests {
             (
                 "scheduler = \"slurm\"\ncores_per_node = 4\nqueue = \"x\"\n",
                 "systems/x.toml:3: unknown field `queue`",
+            ),
+            (
+                "scheduler = \"none\"\ncores_per_node = 4\n[network]\nsource = \"guessed\"\nalpha_s = 1e-6\nbeta_s_per_byte = 1e-10\n",
+                "systems/x.toml:4: `network.source` is \"guessed\"; give one of \"measured\", \"assumed\"",
+            ),
+            (
+                "scheduler = \"none\"\ncores_per_node = 4\n[network]\nsource = \"assumed\"\nalpha_s = -1e-6\nbeta_s_per_byte = 1e-10\n",
+                "systems/x.toml:5: `network.alpha_s` is -0.000001; give a positive number of seconds",
             ),
             (
                 "scheduler = \"slurm\"\ncores_per_node = 4\n[env]\n\"A B\" = \"1\"\n",

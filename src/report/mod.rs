@@ -7,4 +7,5 @@ pub mod accuracy;
 pub mod analysis;
 pub mod figures;
 pub mod markdown;
+pub mod prediction;
 pub mod tables;

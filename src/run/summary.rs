@@ -93,6 +93,11 @@ pub struct RunSummary {
     /// serial and rayon.
     #[serde(default)]
     pub recuts: Option<u64>,
+    /// MPI: where each rank ran, in rank order, as `HOST:CPUS/THREADS` joined by `; `
+    /// (its allowed CPUs as the kernel lists them, and its threads); null for serial and
+    /// rayon, and inside a rank (the launching process fills it in).
+    #[serde(default)]
+    pub rank_cpus: Option<String>,
     pub kinetic_energy_initial: f64,
     pub kinetic_energy_final: f64,
     /// Total momentum [px, py] before the first step.

@@ -59,10 +59,8 @@ impl Environment {
             logical_cores: machine_cores(),
             physical_cores: physical_cores(&cpuinfo).unwrap_or_else(machine_cores),
             usable_cpus: usable_cpus(),
-            cpu_affinity: read("/proc/self/status")
-                .lines()
-                .find_map(|line| line.strip_prefix("Cpus_allowed_list:"))
-                .map_or_else(|| UNKNOWN.to_owned(), |list| list.trim().to_owned()),
+            cpu_affinity: crate::system::machine::allowed_cpu_list()
+                .unwrap_or_else(|| UNKNOWN.to_owned()),
             memory_bytes: machine_memory_bytes().unwrap_or(0),
             os: os_name(),
             rustc: env!("COLLIDE_RUSTC_VERSION").to_owned(),

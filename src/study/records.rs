@@ -16,7 +16,7 @@ use crate::study::environment::Environment;
 use crate::study::manifest::{PLACEMENT_KEYS, Scaling};
 use crate::system::output::write_atomically;
 
-pub const SCHEMA_VERSION: u32 = 12;
+pub const SCHEMA_VERSION: u32 = 13;
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
 const OLDEST_READABLE_VERSION: u32 = 1;
 
@@ -88,6 +88,10 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     (12, "compressibility_z_g", Fill::F64(f64::NAN)),
     (12, "collision_rate_se", Fill::F64(f64::NAN)),
     (12, "temperature_se", Fill::F64(f64::NAN)),
+    // Version 12 kept the ranks' load imbalance in the JSON summary only.
+    (13, "load_imbalance", Fill::F64(f64::NAN)),
+    // Version 12 did not record where each rank ran.
+    (13, "rank_cpus", Fill::Str("")),
 ];
 
 /// What became of one run.
@@ -405,7 +409,7 @@ macro_rules! for_each_column {
                  rustc, profile, features, git_commit, mpi_library, study_started_utc,
                  finished_utc, method <- run, observe <- run, choice <- run,
                  temperature_curve <- run, cpu_affinity, ab_side, scene_hash, job_id,
-                 node_list;
+                 node_list, rank_cpus <- run;
             u64: threads <- run, ranks <- run, workers <- run, n <- run, steps <- run,
                  pair_collisions <- run, wall_collisions <- run, logical_cores, physical_cores,
                  memory_bytes;
@@ -415,7 +419,7 @@ macro_rules! for_each_column {
                  broad_phase_s <- run, collision_s <- run, communication_s <- run,
                  messages_per_step_max <- run, messages_per_step_mean <- run,
                  bytes_per_step_max <- run, bytes_per_step_mean <- run,
-                 collectives_per_step <- run,
+                 collectives_per_step <- run, load_imbalance <- run,
                  kinetic_energy_initial <- run, kinetic_energy_final <- run, momentum_initial_x,
                  momentum_initial_y, momentum_final_x, momentum_final_y, max_overlap <- run,
                  max_wall_penetration <- run, load_average_start, load_average,

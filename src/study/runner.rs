@@ -18,7 +18,7 @@ use std::time::Duration;
 use anyhow::{Context, anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::cluster::placement::{mask_warnings, rank_cpus};
+use crate::cluster::placement::{mask_warnings, rank_cpus, rank_cpus_column};
 use crate::cluster::render::{Job, job_script};
 use crate::cluster::site::{LOCAL, Site};
 use crate::cluster::slurm::JobState;
@@ -505,9 +505,11 @@ impl Sitting<'_> {
                 Record::failed(&context, status, batch::no_exit_code(&end))
             }
         };
-        for warning in mask_warnings(&rank_cpus(&end.stderr)) {
+        let ranks = rank_cpus(&end.stderr);
+        for warning in mask_warnings(&ranks) {
             eprintln!("warning: {key}, job {}: {warning}", end.id);
         }
+        record.rank_cpus = rank_cpus_column(&ranks);
         record.job_id = end.id;
         record.node_list = end.info.nodes;
         record.queue_wait_s = end.info.queue_wait_s.unwrap_or(f64::NAN);

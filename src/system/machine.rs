@@ -68,6 +68,16 @@ pub fn usable_cpus() -> usize {
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, NonZeroUsize::get))
 }
 
+/// The CPUs this process may run on as the kernel lists them (`Cpus_allowed_list` of
+/// /proc/self/status, e.g. `0-3,8`), if known.
+pub fn allowed_cpu_list() -> Option<String> {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()?
+        .lines()
+        .find_map(|line| line.strip_prefix("Cpus_allowed_list:"))
+        .map(|list| list.trim().to_owned())
+}
+
 /// Counts the CPUs in a kernel CPU list such as `0-3,8,10-11`.
 fn count_cpu_list(list: &str) -> Option<usize> {
     let mut count = 0;

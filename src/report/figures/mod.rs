@@ -1,7 +1,8 @@
 //! The report's figures (PNG, plotters), one file per figure behind one interface,
 //! [`Chart`]: the scaling figures of each setup (`scaling`: time, speedup, efficiency and
 //! steps per second against workers), the accuracy study's (`pareto`, `stability`,
-//! `cooling`) and the check history's (`history`). Which figures a report gets is decided
+//! `cooling`), the check history's (`history`) and the scaling prediction's
+//! (`prediction`). Which figures a report gets is decided
 //! here, not by its caller: [`draw`] asks each figure type of the list which of the
 //! analysed data it applies to, draws those, and says what it drew for report.md to link.
 //! Shared here too: the embedded font (DejaVu Sans, so no system font is needed), the
@@ -20,6 +21,7 @@ use plotters::prelude::*;
 
 use crate::report::accuracy::{CoolingCurve, PackingGroup};
 use crate::report::analysis::Setup;
+use crate::report::prediction::Prediction;
 use crate::study::history::Entry;
 use crate::system::output::{Canvas, write_png};
 
@@ -50,6 +52,7 @@ figures! {
     stability::Stability,
     cooling::Cooling,
     history::History,
+    prediction::PredictionChart,
 }
 
 /// What figures are drawn from: a study's analysed records, or a check history.
@@ -65,6 +68,9 @@ pub struct Analysed<'a> {
     pub cooling: &'a [CoolingCurve],
     /// A check history's entries, oldest check first; `None` for a study.
     pub history: Option<&'a [Entry]>,
+    /// The study's scaling prediction ([`crate::report::prediction::predict`]), if it has
+    /// MPI runs to predict from.
+    pub prediction: Option<&'a Prediction>,
 }
 
 /// Where report.md links a figure.
