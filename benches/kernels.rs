@@ -11,7 +11,9 @@
 //! Throughput is in disks per iteration, so criterion's "elem/s" is particle-steps per second;
 //! in the `event` group it is collisions (pair and wall) per second of the event-driven
 //! method. The `step` and `event` groups run both methods on the same periodic gases at
-//! N = 10^4, 10^5 and 10^6: they are the cost model of `method = "auto"`.
+//! N = 10^4, 10^5 and 10^6: they are the cost model of `method = "auto"`. The
+//! `event_walls` group runs the event method on the walled lattice gases of issue 54
+//! (N = 10^5 and 10^6, packings 0.3, 0.5 and 0.7).
 //! Run: `cargo bench --bench kernels` (MPI runs need `mpirun`: see `docs/performance.md`).
 //! Before it is timed, the yardstick is checked against our step: same energy (elastic
 //! gas) and the same number of pair impulses, to 0.5%, after the same 50 steps.
@@ -32,7 +34,7 @@ use collide::backend::team::with_team;
 use collide::backend::threads::ThreadedStepper;
 use collide::run::spec::{InjectedSlowdown, MethodSpec, RunSpec, SceneSource};
 use collide::sim::event::{EventParams, EventSim};
-use collide::sim::scene::GasSpec;
+use collide::sim::scene::{GasSpec, Placement};
 use collide::sim::{Boundary, Broadphase, Particles, Scene, StepParams, Stepper};
 use collide::system::machine::{CpuScope, cpu_seconds};
 
@@ -331,12 +333,45 @@ fn yardstick_rates() {
     }
 }
 
+/// Issue 54's figure: the event method on the walled lattice gases `collide simulate
+/// SCENE --method event --n N --packing P` starts from with `placement = "lattice"` (unit
+/// disks, v_rms = 1, elastic), at N = 10⁵ and 10⁶ and packings 0.3, 0.5 and 0.7. Each
+/// sample processes [`COLLISIONS`] collisions (pair and wall; walls are under 1% of them)
+/// after a warm-up of one per disk; elem/s is collisions per second on one core (stale
+/// events and cell crossings are work, not counted). The CLI also writes the state out
+/// every dt, which the bench leaves out.
+fn event_walls(c: &mut Criterion) {
+    const COLLISIONS: u64 = 200_000;
+    let mut group = c.benchmark_group("event_walls");
+    group.sample_size(10);
+    group.throughput(Throughput::Elements(COLLISIONS));
+    for n in [100_000, 1_000_000] {
+        for packing in [0.3, 0.5, 0.7] {
+            let scene = GasSpec {
+                seed: 42,
+                placement: Placement::Lattice,
+                ..GasSpec::unit(n, packing)
+            }
+            .build()
+            .expect("a square lattice holds up to π/4");
+            let params = EventParams { tc: 0.0 };
+            let mut sim = EventSim::new(scene.domain, scene.physics, params, &scene.particles);
+            sim.advance_collisions(n as u64);
+            group.bench_function(BenchmarkId::new(format!("n{n}"), packing), |b| {
+                b.iter(|| sim.advance_collisions(COLLISIONS));
+            });
+        }
+    }
+    group.finish();
+}
+
 criterion_group!(
     benches,
     serial_kernels,
     backend_steps,
     distributed_step,
-    cost_model
+    cost_model,
+    event_walls
 );
 
 /// CPU seconds of the calling thread: on a loaded machine, close to what the thread

@@ -8,6 +8,7 @@ mod check;
 mod cli;
 mod cluster;
 mod equilibrium;
+mod event_reference;
 mod faults;
 mod golden;
 mod hazards;
