@@ -109,7 +109,7 @@ impl Lcg {
 fn build(scene: &Reference) -> (Domain, Particles) {
     let n = scene.side * scene.side;
     let radius = |idx: usize| {
-        if idx % 2 == 0 {
+        if idx.is_multiple_of(2) {
             1.0
         } else {
             scene.radius_ratio

@@ -245,8 +245,8 @@ impl<Q: Fn(f64, f64) -> bool> SharedChains<'_, Q> {
         let n_slots = gathered.disks.len();
         let (mut has_own, mut closed) = (vec![false; n_slots], vec![true; n_slots]);
         let mut counted_by = vec![(u32::MAX, 0); n_slots];
-        for slot in 0..n_slots {
-            let (root, owner, id) = (chain[slot], gathered.owner[slot], gathered.disks.id[slot]);
+        for (slot, &root) in chain.iter().enumerate() {
+            let (owner, id) = (gathered.owner[slot], gathered.disks.id[slot]);
             has_own[root] |= owner == me;
             let disks = &gathered.disks;
             let query_is_near = || (self.query_is_near)(disks.y[slot], disks.radius[slot]);

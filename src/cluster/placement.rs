@@ -177,14 +177,16 @@ pub fn mask_warnings(ranks: &[RankCpus]) -> Vec<String> {
 
 /// The CPUs of a kernel CPU list (`0-3,8`).
 fn cpu_list(text: &str) -> Vec<usize> {
+    // A part that does not read as a CPU or a range of CPUs adds none.
     text.split(',')
-        .flat_map(|part| {
+        .filter_map(|part| {
             let (low, high) = part.split_once('-').unwrap_or((part, part));
             match (low.trim().parse::<usize>(), high.trim().parse::<usize>()) {
-                (Ok(low), Ok(high)) if high >= low && high - low < 1 << 16 => low..=high,
-                _ => 1..=0,
+                (Ok(low), Ok(high)) if high >= low && high - low < 1 << 16 => Some(low..=high),
+                _ => None,
             }
         })
+        .flatten()
         .collect()
 }
 

@@ -264,7 +264,7 @@ pub fn ends_interval(step: u64, steps: u64, samples: u64) -> bool {
 /// When step `step` (1-based) of `steps` steps of `dt` ends a block of the series: the
 /// time it ends at, or `None` inside a block. Every backend closes its blocks here.
 pub fn block_end(step: u64, steps: u64, dt: f64) -> Option<f64> {
-    ends_interval(step, steps, SERIES_BLOCKS).then(|| step as f64 * dt)
+    ends_interval(step, steps, SERIES_BLOCKS).then_some(step as f64 * dt)
 }
 
 /// What happened in one block of a run.

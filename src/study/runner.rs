@@ -622,10 +622,10 @@ impl Children {
         if self.mpi_yields_when_idle && configuration.backend.capabilities().mpi {
             command.env(YIELD_WHEN_IDLE, "1");
         }
-        if let Some(system) = self.system.as_ref() {
-            if configuration.backend.capabilities().mpi {
-                command.args(["--system", system]);
-            }
+        if let Some(system) = self.system.as_ref()
+            && configuration.backend.capabilities().mpi
+        {
+            command.args(["--system", system]);
         }
         run_with_timeout(command, self.timeout)
     }
