@@ -29,10 +29,12 @@ pub enum Format {
     Markdown,
 }
 
-/// What tells rows apart besides a configuration's key: the study (several studies may
-/// share a folder); the scene's contents (a scene edited between two results files) and
-/// the side of an A/B check.
-const STUDY: &str = "study";
+/// The settings every table has, whatever its configurations' keys name: what its rows
+/// are grouped by (several studies may share a folder).
+const GROUPED: [&str; 5] = ["study", "scene", "backend", "workers", "n"];
+
+/// What else tells rows apart besides a configuration's key: the scene's contents (a
+/// scene edited between two results files) and the side of an A/B check.
 const CONTEXT: [&str; 2] = ["scene_hash", "ab_side"];
 
 /// Significant digits of a setting's number (dt, packing, tc).
@@ -76,12 +78,14 @@ impl Table {
         let mut order: Vec<String> = Vec::new();
         let mut groups: BTreeMap<String, Vec<&Record>> = BTreeMap::new();
         for record in records {
-            // What was computed, where, and by which side of an A/B check: never pooled.
+            // What was computed (the configuration, and n and the scene's contents, which
+            // its key may leave to the scene), where, and by which side of an A/B check:
+            // never pooled.
             let key = format!(
                 "{}|{}|{}|{}x{}|{}",
                 record.study,
+                record.config_key,
                 record.setup_key(),
-                record.backend,
                 record.ranks,
                 record.threads,
                 record.ab_side
@@ -332,10 +336,11 @@ fn csv_line<'a>(fields: impl Iterator<Item = &'a str>) -> String {
     quoted.join(",") + "\n"
 }
 
-/// The settings named by the records' configuration keys, each once: the study, the
-/// scene and the placement first, then the others in key order, then [`CONTEXT`].
+/// The settings of the records' rows, each once: [`GROUPED`] and those the
+/// configuration keys name, the study, the scene and the placement first, then the others
+/// in key order, then [`CONTEXT`].
 fn setting_names(records: &[Record]) -> Vec<String> {
-    let mut names: Vec<String> = vec![STUDY.to_owned()];
+    let mut names: Vec<String> = GROUPED.map(str::to_owned).to_vec();
     for record in records {
         for entry in record.config_key.split(';') {
             let name = entry.split('=').next().unwrap_or_default();
@@ -349,7 +354,7 @@ fn setting_names(records: &[Record]) -> Vec<String> {
             .iter()
             .any(|key| key.trim_end_matches('=') == name)
     };
-    let front = |name: &String| name == STUDY || name == "scene" || is_placement(name);
+    let front = |name: &String| GROUPED[..2].contains(&name.as_str()) || is_placement(name);
     let (mut first, rest): (Vec<String>, Vec<String>) = names.into_iter().partition(front);
     first.extend(rest);
     first.extend(CONTEXT.map(str::to_owned));
