@@ -419,8 +419,14 @@ fn render_draws_the_disks_as_a_png_and_the_run_as_a_gif() {
         String::from_utf8_lossy(&out.stderr)
     );
     let picture = image::open(&png).unwrap().to_rgb8();
-    // A square box: 800 pixels and a 10-pixel margin each side.
-    assert_eq!(picture.dimensions(), (820, 820));
+    // A square box: 800 pixels and a 10-pixel margin each side, and the colour key below.
+    assert_eq!(picture.dimensions(), (820, 860));
+    // The key's bar runs from blue (at rest) to red (twice the rms speed) under the box.
+    let key_row = 860 - 40 + 6;
+    let blue = picture.get_pixel(11, key_row).0;
+    let red = picture.get_pixel(10 + 239, key_row).0;
+    assert!(blue[2] > 200 && blue[0] < 60, "{blue:?}");
+    assert!(red[0] > 220 && red[2] < 60, "{red:?}");
     let coloured = picture.pixels().filter(|p| p.0 != [255, 255, 255]).count();
     // 2000 disks at packing 0.05 cover about 5% of the box, plus its outline.
     assert!(coloured > 800 * 800 / 40, "only {coloured} coloured pixels");
