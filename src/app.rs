@@ -46,7 +46,7 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Simulate(args) => simulate(&args),
         Command::Run(args) => run_study(&args),
         Command::Results(args) => {
-            crate::out!("{}", results::show(&args.path)?);
+            crate::out!("{}", results::show(&args.path, args.format)?);
             Ok(())
         }
         Command::Report(args) => write_report(&args),

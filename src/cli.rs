@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand};
 
 use crate::cluster::site::LOCAL;
+use crate::report::configurations::Format;
 use crate::run::backend_kind::{BackendKind, MPI_LAUNCHER};
 use crate::run::overrides::Overrides;
 
@@ -60,7 +61,9 @@ Examples:
   Every recorded run of a study, then its speedup and efficiency per backend
     collide results results/seed-report/
   One results file
-    collide results results/baseline/records.parquet";
+    collide results results/baseline/records.parquet
+  Every configuration's times as CSV, for a spreadsheet or a script
+    collide results results/accuracy/ --format csv";
 
 const REPORT_EXAMPLES: &str = "\
 Examples:
@@ -309,6 +312,10 @@ pub struct RunArgs {
 pub struct ResultsArgs {
     /// A study's results folder (results/NAME/) or one results file.
     pub path: PathBuf,
+    /// text (the terminal tables), csv or json (one row per configuration, times in
+    /// seconds, for scripts), or markdown (to paste).
+    #[arg(long, value_enum, default_value_t = Format::Text)]
+    pub format: Format,
 }
 
 #[derive(Debug, Args)]

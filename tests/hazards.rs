@@ -262,13 +262,12 @@ fn a_results_folder_with_a_copy_counts_each_run_once_and_refuses_impossible_valu
     let study = out.join("tiny");
     let file = records::files_in(&study).unwrap().remove(0);
     std::fs::copy(&file, study.join("backup.parquet")).unwrap();
-    let shown = collide(&["results", study.to_str().unwrap()]);
+    let shown = collide(&["results", study.to_str().unwrap(), "--format", "json"]);
     assert!(shown.status.success(), "{}", stderr(&shown));
     assert!(stderr(&shown).contains("2 row(s)"), "{}", stderr(&shown));
-    let table = String::from_utf8_lossy(&shown.stdout).into_owned();
-    let line = table.lines().find(|l| l.starts_with("serial")).unwrap();
-    let reps: Vec<&str> = line.split_whitespace().collect();
-    assert_eq!(reps[7], "2", "{table}");
+    let rows: serde_json::Value = serde_json::from_slice(&shown.stdout).unwrap();
+    assert_eq!(rows[0]["backend"], "serial", "{rows}");
+    assert_eq!(rows[0]["repetitions"], 2, "{rows}");
 
     let mut rows = records::read(&file).unwrap();
     rows[0].wall_s = -1.0;

@@ -497,18 +497,19 @@ fn unfinished_files_of_a_killed_study_are_never_results_and_are_removed_next_tim
     // A file of the user's is no leftover.
     let own = study.join(".notes");
     std::fs::write(&own, "mine").unwrap();
-    let table = collide(&["results", study.to_str().unwrap()]);
+    let table = collide(&["results", study.to_str().unwrap(), "--format", "json"]);
     assert!(
         table.status.success(),
         "{}",
         String::from_utf8_lossy(&table.stderr)
     );
-    let table = String::from_utf8(table.stdout).unwrap();
+    let rows: serde_json::Value = serde_json::from_slice(&table.stdout).unwrap();
     assert!(
-        table
-            .lines()
-            .any(|l| l.starts_with("serial") && l.contains("    1      0")),
-        "{table}"
+        rows.as_array()
+            .unwrap()
+            .iter()
+            .any(|row| row["backend"] == "serial" && row["repetitions"] == 1 && row["failed"] == 0),
+        "{rows}"
     );
     let resumed = run(&["--resume"]);
     assert!(

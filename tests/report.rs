@@ -377,13 +377,18 @@ fn no_report_prints_a_serial_fraction_outside_zero_to_one_or_from_two_worker_cou
 fn runs_under_ten_milliseconds_are_flagged_and_medians_carry_an_interval() {
     let text = markdown(&records());
     // Serial: median 0.0102 of 0.0100, 0.0102, 0.0110, inside its bootstrap interval.
+    // Every backend's column in milliseconds, the unit that fits its fastest run.
     assert!(
-        text.contains("| 0.0102 [0.0100, 0.0110] (0.0100–0.0110, 3 runs)"),
+        text.contains("| workers | serial [ms] | rayon [ms] | mpi [ms] |"),
+        "{text}"
+    );
+    assert!(
+        text.contains("| 10.2 [10.0, 11.0] (10.0–11.0, 3 runs)"),
         "{text}"
     );
     // Rayon at 2 takes 5.6 ms: too short to time well.
     assert!(
-        text.contains("0.0056 [0.0055, 0.0060] (0.0055–0.0060, 3 runs) ⏱"),
+        text.contains("5.6 [5.5, 6.0] (5.5–6.0, 3 runs) ⏱"),
         "{text}"
     );
     assert!(text.contains("run more steps"), "{text}");
@@ -415,8 +420,14 @@ fn render_draws_the_disks_as_a_png_and_the_run_as_a_gif() {
         String::from_utf8_lossy(&out.stderr)
     );
     let picture = image::open(&png).unwrap().to_rgb8();
-    // A square box: 800 pixels and a 10-pixel margin each side.
-    assert_eq!(picture.dimensions(), (820, 820));
+    // A square box: 800 pixels and a 10-pixel margin each side, and the colour key below.
+    assert_eq!(picture.dimensions(), (820, 860));
+    // The key's bar runs from blue (at rest) to red (twice the rms speed) under the box.
+    let key_row = 860 - 40 + 6;
+    let blue = picture.get_pixel(11, key_row).0;
+    let red = picture.get_pixel(10 + 239, key_row).0;
+    assert!(blue[2] > 200 && blue[0] < 60, "{blue:?}");
+    assert!(red[0] > 220 && red[2] < 60, "{red:?}");
     let coloured = picture.pixels().filter(|p| p.0 != [255, 255, 255]).count();
     // 2000 disks at packing 0.05 cover about 5% of the box, plus its outline.
     assert!(coloured > 800 * 800 / 40, "only {coloured} coloured pixels");
@@ -474,7 +485,9 @@ fn a_file_written_by_schema_version_1_is_reported_as_timed_strong_scaling() {
     );
     let text = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(
-        text.contains("| workers | seconds_serial | seconds_rayon | seconds_mpi |"),
+        text.contains("| workers | serial [")
+            && text.contains("] | rayon [")
+            && text.contains("] | mpi ["),
         "{text}"
     );
     assert!(text.contains("Every run ended in the same state"), "{text}");
@@ -618,7 +631,7 @@ fn the_accuracy_report_tabulates_errors_and_draws_the_pareto_and_stability_figur
     );
     assert!(text.contains("![accuracy-stability.png](accuracy-stability.png)"));
     // One run per setup: no scaling sections.
-    assert!(!text.contains("Seconds per run"), "{text}");
+    assert!(!text.contains("Time per run"), "{text}");
 }
 
 #[test]
@@ -831,4 +844,131 @@ fn the_prediction_of_an_mpi_study_says_what_it_assumed_and_is_drawn() {
     let drawn = figures::draw(&analysed, dir.path()).unwrap();
     assert_eq!(drawn.0.len(), 1);
     assert!(dir.path().join(FILE_NAME).is_file());
+}
+
+/// [`accuracy_records`] with the configuration keys an accuracy manifest gives them:
+/// packing, dt, steps, method and observe swept, the rest the scene's.
+fn keyed_accuracy_records() -> Vec<Record> {
+    let mut records = accuracy_records();
+    for record in &mut records {
+        record.config_key = format!(
+            "scene=gas;n=-;packing={};dt={};steps={};seed=-;broadphase=-;backend=serial;workers=1;method={};observe={}",
+            record.packing, record.dt, record.steps, record.method, record.observe
+        );
+    }
+    records
+}
+
+#[test]
+fn the_results_table_has_a_column_for_each_swept_setting_and_a_line_for_the_rest() {
+    use collide::report::configurations::Table;
+
+    let text = Table::of(&keyed_accuracy_records()).text();
+    let mut lines = text.lines();
+    let constants = lines.next().unwrap();
+    assert!(constants.starts_with("Every run:"), "{text}");
+    for shared in [
+        "backend = serial",
+        "workers = 1",
+        "n = 1000",
+        "seed = 12345",
+    ] {
+        assert!(constants.contains(shared), "{shared}: {text}");
+    }
+    let header: Vec<&str> = lines.next().unwrap().split_whitespace().collect();
+    assert_eq!(
+        header[..5],
+        ["packing", "dt", "steps", "method", "observe"],
+        "{text}"
+    );
+    for constant in ["backend", "workers", "n", "seed", "broadphase", "scene"] {
+        assert!(
+            !header.contains(&constant),
+            "{constant} is a column: {text}"
+        );
+    }
+    // One row per configuration, the event method's told apart from the step's.
+    let rows: Vec<&str> = lines.take_while(|l| !l.starts_with('⏱')).collect();
+    assert_eq!(rows.len(), 8, "{text}");
+    assert!(
+        rows[0].split_whitespace().collect::<Vec<_>>()[..5]
+            == ["0.05", "0.1", "100", "event", "timing"],
+        "{text}"
+    );
+    // Times in the unit of each column's fastest: 4.8 ms (step, dt = 1, packing 0.05).
+    assert!(rows[1].contains("4.8 ms"), "{text}");
+    assert!(rows[3].contains("360.0 ms"), "{text}");
+}
+
+#[test]
+fn the_results_table_of_drawn_runs_shows_frames_per_second_with_drawing() {
+    use collide::report::configurations::Table;
+
+    let text = Table::of(&drawn_records()).text();
+    let header = text.lines().nth(1).unwrap();
+    assert!(header.contains("frames/s with drawing"), "{text}");
+    // rayon at 2: 400 steps in 5.6 ms, drawn in three times that: 17857 frames/s.
+    let row = text
+        .lines()
+        .find(|l| l.starts_with("rayon") && l.contains(" 2 "))
+        .unwrap();
+    assert!(row.contains("71429") && row.contains("17857"), "{text}");
+    assert!(!Table::of(&records()).text().contains("with drawing"));
+}
+
+#[test]
+fn the_results_export_as_csv_and_json_with_every_setting_and_units_in_the_names() {
+    use collide::report::configurations::Table;
+
+    let table = Table::of(&records());
+    let json: serde_json::Value = serde_json::from_str(&table.json()).unwrap();
+    let rows = json.as_array().unwrap();
+    assert_eq!(rows.len(), 7, "{json}");
+    let serial = &rows[0];
+    assert_eq!(serial["backend"], "serial");
+    assert_eq!(serial["workers"], 1);
+    // Constant settings too: a script needs no header line.
+    assert_eq!(serial["n"], 1000);
+    assert_eq!(serial["study"], "synthetic");
+    assert_eq!(serial["median_s"], 0.0102);
+    assert_eq!(serial["repetitions"], 3);
+    assert!(serial["fps_with_drawing"].is_null(), "{serial}");
+
+    let csv = table.csv();
+    let lines: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(lines.len(), 8, "{csv}");
+    assert!(lines.iter().all(|l| l.len() == lines[0].len()), "{csv}");
+    let column = |name: &str| lines[0].iter().position(|h| *h == name).unwrap();
+    for name in [
+        "median_s",
+        "median_ci_low_s",
+        "min_s",
+        "max_s",
+        "steps_per_s",
+    ] {
+        column(name);
+    }
+    let rayon_2 = lines
+        .iter()
+        .find(|l| l[column("backend")] == "rayon" && l[column("workers")] == "2")
+        .unwrap();
+    assert_eq!(rayon_2[column("median_s")].parse::<f64>().unwrap(), 0.0056);
+    // Not measured: empty.
+    assert_eq!(rayon_2[column("fps_with_drawing")], "");
+
+    let markdown = table.markdown();
+    let lines: Vec<&str> = markdown.lines().collect();
+    assert!(
+        lines[0].starts_with("Every run: study = synthetic"),
+        "{markdown}"
+    );
+    assert!(
+        lines[2].starts_with("| backend | workers | median |"),
+        "{markdown}"
+    );
+    assert!(lines[3].starts_with("| --- | ---: | ---: |"), "{markdown}");
+    assert_eq!(
+        lines[4],
+        "| serial | 1 | 10.2 ms | 10.0–11.0 ms | 10.0–11.0 ms | 3 | 0 |"
+    );
 }

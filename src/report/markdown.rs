@@ -14,6 +14,7 @@ use crate::report::analysis::{Baseline, MIN_WORKER_COUNTS, Setup, TIMING_CONFIDE
 use crate::report::figures::cooling::COOLING_FILE;
 use crate::report::figures::history::{HISTORY_FILE, checks};
 use crate::report::figures::scaling::Figure;
+use crate::report::units::{TimeUnit, duration};
 use crate::run::backend_kind::BackendKind;
 use crate::study::history::Entry;
 use crate::study::manifest::Scaling;
@@ -300,13 +301,17 @@ fn setup_section(out: &mut String, setup: &Setup) {
     speedup_table(out, setup);
 }
 
-/// The seed's Cuadro 1: workers × median seconds per run of each backend.
+/// The seed's Cuadro 1: workers × median time per run of each backend, each backend's
+/// column in the unit that fits its fastest time.
 fn seconds_table(out: &mut String, setup: &Setup) {
     let workers = setup.worker_counts();
-    let _ = writeln!(out, "### Seconds per run (the seed's Cuadro 1)\n");
+    let units: Vec<TimeUnit> = (setup.backends.iter())
+        .map(|b| TimeUnit::for_column(b.points.iter().map(|p| p.min_s)))
+        .collect();
+    let _ = writeln!(out, "### Time per run (the seed's Cuadro 1)\n");
     let _ = write!(out, "| workers |");
-    for backend in &setup.backends {
-        let _ = write!(out, " seconds_{} |", backend.backend);
+    for (backend, unit) in setup.backends.iter().zip(&units) {
+        let _ = write!(out, " {} [{}] |", backend.backend, unit.symbol());
     }
     let _ = write!(out, "\n| ---: |");
     for _ in &setup.backends {
@@ -315,17 +320,17 @@ fn seconds_table(out: &mut String, setup: &Setup) {
     let _ = writeln!(out);
     for &p in &workers {
         let _ = write!(out, "| {p} |");
-        for backend in &setup.backends {
+        for (backend, unit) in setup.backends.iter().zip(&units) {
             match backend.points.iter().find(|point| point.workers == p) {
                 Some(point) => {
                     let _ = write!(
                         out,
-                        " {:.4} [{:.4}, {:.4}] ({:.4}–{:.4}, {} runs){}{} |",
-                        point.median_s,
-                        point.median_ci_s[0],
-                        point.median_ci_s[1],
-                        point.min_s,
-                        point.max_s,
+                        " {} [{}, {}] ({}–{}, {} runs){}{} |",
+                        unit.number(point.median_s),
+                        unit.number(point.median_ci_s[0]),
+                        unit.number(point.median_ci_s[1]),
+                        unit.number(point.min_s),
+                        unit.number(point.max_s),
                         point.reps,
                         if point.oversubscribed { " ⚠" } else { "" },
                         if point.too_short() { " ⏱" } else { "" }
@@ -341,8 +346,8 @@ fn seconds_table(out: &mut String, setup: &Setup) {
     let _ = writeln!(
         out,
         "\nMedian of the repetitions with its {:.0}% bootstrap interval (seeded) in brackets, \
-         and their min–max; ⚠ marks oversubscribed runs, ⏱ a median under {:.0} ms of \
-         stepping, too short to time well: run more steps.\n",
+         and their min–max, in the unit its column names; ⚠ marks oversubscribed runs, ⏱ a \
+         median under {:.0} ms of stepping, too short to time well: run more steps.\n",
         100.0 * TIMING_CONFIDENCE,
         1e3 * TOO_SHORT_S
     );
@@ -377,8 +382,8 @@ fn speedup_baselines(out: &mut String, setup: &Setup) {
     }
     for backend in &setup.backends {
         let baseline = match backend.baseline {
-            Baseline::Serial(t) => format!("the serial backend ({t:.4} s)"),
-            Baseline::OneWorker(t) => format!("{} at 1 worker ({t:.4} s)", backend.backend),
+            Baseline::Serial(t) => format!("the serial backend ({})", duration(t)),
+            Baseline::OneWorker(t) => format!("{} at 1 worker ({})", backend.backend, duration(t)),
             Baseline::Missing => "nothing (no serial or 1-worker run)".to_owned(),
         };
         let _ = writeln!(
@@ -521,10 +526,10 @@ fn findings(out: &mut String, setups: &[Setup]) {
         {
             let _ = writeln!(
                 out,
-                "- {}: fastest is {backend} with {} worker(s), median {:.4} s ({:.0} steps/s).",
+                "- {}: fastest is {backend} with {} worker(s), median {} ({:.0} steps/s).",
                 describe(setup),
                 best.workers,
-                best.median_s,
+                duration(best.median_s),
                 best.fps
             );
         }
@@ -559,17 +564,17 @@ fn findings(out: &mut String, setups: &[Setup]) {
             if let Some(serial) = serial {
                 let _ = writeln!(
                     out,
-                    "- Against the seed report (1000 disks, 400 cycles): serial {:.4} s here against \
+                    "- Against the seed report (1000 disks, 400 cycles): serial {} here against \
                      its {SEED_SERIAL_S} s, {:.0}× faster.",
-                    serial.median_s,
+                    duration(serial.median_s),
                     SEED_SERIAL_S / serial.median_s
                 );
             }
             if let Some(mpi) = mpi_12 {
                 let _ = writeln!(
                     out,
-                    "- MPI with 12 ranks: {:.4} s here against the seed's {SEED_MPI_12_S} s{}.",
-                    mpi.median_s,
+                    "- MPI with 12 ranks: {} here against the seed's {SEED_MPI_12_S} s{}.",
+                    duration(mpi.median_s),
                     if mpi.oversubscribed {
                         " (oversubscribed here, so not a scaling measurement)"
                     } else {

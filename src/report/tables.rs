@@ -1,7 +1,8 @@
-//! `collide results`: terminal tables of a study's records — median wall time and its
-//! spread per configuration, whether the backends agreed on `state_hash`, and per setup
-//! the seed-style table of median seconds, speedup and efficiency per backend (which
-//! `collide run` prints at its end too).
+//! `collide results`: a study's records found and read, then its tables — the
+//! configurations' (`configurations`), whether the backends agreed on `state_hash`, and
+//! per setup the seed-style table of median times, speedup and efficiency per backend
+//! (which `collide run` prints at its end too); or the configurations as CSV, JSON or
+//! markdown.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -9,9 +10,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 
-use crate::report::analysis::{self, Setup, TIMING_CONFIDENCE, TIMING_SEED, TOO_SHORT_S};
+use crate::report::analysis::{self, Setup};
+use crate::report::configurations::{Format, Table};
 use crate::report::markdown::describe;
-use crate::stats::{median, median_interval};
+use crate::report::units::TimeUnit;
 use crate::study::manifest::Scaling;
 use crate::study::records::{self, Record, STATUS_OK};
 
@@ -79,10 +81,16 @@ pub fn load(path: &Path) -> anyhow::Result<Vec<Record>> {
     Ok(all)
 }
 
-/// What `collide results` prints: [`table`], then [`scaling_table`].
+/// What `collide results` prints of one study: the configurations' [`Table`], whether
+/// the backends agreed ([`hash_agreement`]), then [`scaling_table`].
 pub fn summary(records: &[Record]) -> anyhow::Result<String> {
     let setups = analysis::analyse(records)?;
-    Ok(format!("{}{}", table(records), scaling_table(&setups)))
+    Ok(format!(
+        "{}{}{}",
+        Table::of(records).text(),
+        hash_agreement(records),
+        scaling_table(&setups)
+    ))
 }
 
 /// Per setup that scales, the seed's table: one line per worker count, and per backend
@@ -92,33 +100,37 @@ pub fn scaling_table(setups: &[Setup]) -> String {
     for setup in setups.iter().filter(|s| s.scales()) {
         let _ = writeln!(out, "\n{}", describe(setup));
         let workers = setup.worker_counts();
+        // Each backend's times in the unit that fits its fastest.
+        let units: Vec<TimeUnit> = (setup.backends.iter())
+            .map(|b| TimeUnit::for_column(b.points.iter().map(|p| p.median_s)))
+            .collect();
         let _ = write!(out, "{:>7}", "workers");
         for backend in &setup.backends {
-            let _ = write!(
-                out,
-                " {:>12} {:>7} {:>6}",
-                format!("{} s", backend.backend),
-                "S(p)",
-                "E(p)"
-            );
+            let _ = write!(out, " {:>12} {:>7} {:>6}", backend.backend, "S(p)", "E(p)");
         }
         let _ = writeln!(out);
         for p in workers {
             let _ = write!(out, "{p:>7}");
-            for backend in &setup.backends {
+            for (backend, unit) in setup.backends.iter().zip(&units) {
                 match backend.points.iter().find(|point| point.workers == p) {
                     // Without a serial or 1-worker run there is no speedup to show.
                     Some(point) if point.speedup.is_finite() => {
                         let _ = write!(
                             out,
-                            " {:>12.4} {:>7.2} {:>5.0}%",
-                            point.median_s,
+                            " {:>12} {:>7.2} {:>5.0}%",
+                            unit.format(point.median_s),
                             point.speedup,
                             100.0 * point.efficiency
                         );
                     }
                     Some(point) => {
-                        let _ = write!(out, " {:>12.4} {:>7} {:>6}", point.median_s, "—", "—");
+                        let _ = write!(
+                            out,
+                            " {:>12} {:>7} {:>6}",
+                            unit.format(point.median_s),
+                            "—",
+                            "—"
+                        );
                     }
                     None => {
                         let _ = write!(out, " {:>12} {:>7} {:>6}", "", "", "");
@@ -131,7 +143,7 @@ pub fn scaling_table(setups: &[Setup]) -> String {
     if !out.is_empty() {
         let _ = writeln!(
             out,
-            "\nMedian seconds of the stepping loop; speedup S(p) against the serial backend \
+            "\nMedian time of the stepping loop; speedup S(p) against the serial backend \
              (else the same backend at 1 worker); efficiency E(p) = S(p)/p."
         );
     }
@@ -210,10 +222,11 @@ pub fn by_study(records: Vec<Record>) -> Vec<(String, Vec<Record>)> {
     studies
 }
 
-/// What `collide results PATH` prints: the table of each study under `path` (a results
+/// What `collide results PATH` prints: the tables of each study under `path` (a results
 /// file, a study folder, a folder of files copied from several studies, or a folder of
-/// study folders), each headed by its name when there is more than one.
-pub fn show(path: &Path) -> anyhow::Result<String> {
+/// study folders), each headed by its name when there is more than one; as CSV or JSON,
+/// one table of every study's configurations.
+pub fn show(path: &Path, format: Format) -> anyhow::Result<String> {
     let folders = match path.is_dir() && records::files_in(path)?.is_empty() {
         true => study_folders(path)?,
         false => Vec::new(),
@@ -234,6 +247,12 @@ pub fn show(path: &Path) -> anyhow::Result<String> {
             path.display()
         );
     }
+    let every = || -> Vec<Record> { studies.iter().flat_map(|(_, rows)| rows.clone()).collect() };
+    match format {
+        Format::Csv => return Ok(Table::of(&every()).csv()),
+        Format::Json => return Ok(Table::of(&every()).json()),
+        Format::Text | Format::Markdown => {}
+    }
     let mut out = String::new();
     if studies.len() > 1 {
         let names: Vec<&str> = studies.iter().map(|(name, _)| name.as_str()).collect();
@@ -246,10 +265,19 @@ pub fn show(path: &Path) -> anyhow::Result<String> {
         );
     }
     for (name, rows) in &studies {
-        if studies.len() > 1 {
-            let _ = writeln!(out, "\nstudy {name}:");
+        match (format, studies.len() > 1) {
+            (Format::Markdown, true) => {
+                let _ = writeln!(out, "\n## Study `{name}`\n");
+            }
+            (_, true) => {
+                let _ = writeln!(out, "\nstudy {name}:");
+            }
+            _ => {}
         }
-        out.push_str(&summary(rows)?);
+        match format {
+            Format::Markdown => out.push_str(&Table::of(rows).markdown()),
+            _ => out.push_str(&summary(rows)?),
+        }
     }
     Ok(out)
 }
@@ -270,84 +298,6 @@ pub fn one_study<'a>(records: &'a [Record], path: &Path) -> anyhow::Result<&'a s
             names.join(", ")
         ),
     }
-}
-
-/// The table, one line per configuration in first-seen order, then the hash check.
-pub fn table(records: &[Record]) -> String {
-    let mut order: Vec<String> = Vec::new();
-    let mut groups: BTreeMap<String, Vec<&Record>> = BTreeMap::new();
-    for record in records {
-        // What was computed, where, and by which side of an A/B check: never pooled across.
-        let key = format!(
-            "{}|{}|{}x{}|{}",
-            record.setup_key(),
-            record.backend,
-            record.ranks,
-            record.threads,
-            record.ab_side
-        );
-        let group = groups.entry(key.clone()).or_default();
-        if group.is_empty() {
-            order.push(key);
-        }
-        group.push(record);
-    }
-    let mut any_short = false;
-    let mut out = String::new();
-    let _ = writeln!(
-        out,
-        "{:<9} {:>7} {:>9} {:>7} {:>12} {:>21} {:>21} {:>4} {:>6}  scene",
-        "backend", "workers", "n", "steps", "median s", "95% CI s", "min–max s", "reps", "failed"
-    );
-    for key in &order {
-        let group = &groups[key];
-        let ok: Vec<&&Record> = group.iter().filter(|r| r.status == STATUS_OK).collect();
-        let mut times: Vec<f64> = ok.iter().map(|r| r.wall_s).collect();
-        let first = group[0];
-        let (median_s, interval, spread) = if times.is_empty() {
-            ("—".to_owned(), "—".to_owned(), "—".to_owned())
-        } else {
-            let median_s = median(&mut times);
-            let ci = median_interval(&times, TIMING_CONFIDENCE, TIMING_SEED);
-            // Under 10 ms of stepping: too short to time well.
-            any_short |= median_s < TOO_SHORT_S;
-            let short = if median_s < TOO_SHORT_S { "⏱" } else { "" };
-            (
-                format!("{median_s:.4}{short}"),
-                format!("{:.4}–{:.4}", ci.lower, ci.upper),
-                format!("{:.4}–{:.4}", times[0], times[times.len() - 1]),
-            )
-        };
-        let shown = ok.first().copied().copied().unwrap_or(first);
-        let oversubscribed = if shown.oversubscribed {
-            " (oversubscribed)"
-        } else {
-            ""
-        };
-        let _ = writeln!(
-            out,
-            "{:<9} {:>7} {:>9} {:>7} {:>12} {:>21} {:>21} {:>4} {:>6}  {}{oversubscribed}",
-            first.backend,
-            first.workers,
-            shown.n,
-            shown.steps,
-            median_s,
-            interval,
-            spread,
-            ok.len(),
-            group.len() - ok.len(),
-            first.scene
-        );
-    }
-    if any_short {
-        let _ = writeln!(
-            out,
-            "⏱ a median under {:.0} ms of stepping: too short to time well; run more steps.",
-            1e3 * TOO_SHORT_S
-        );
-    }
-    let _ = write!(out, "{}", hash_agreement(records));
-    out
 }
 
 /// One line per physical setup (scene, n, steps, dt, seed, packing) measured by more than

@@ -143,6 +143,7 @@ mod tests {
     fn footprint(n_particles: u64, copies: u64, bytes_per_disk: u64) -> Footprint {
         Footprint {
             n_particles,
+            steps: 100,
             copies,
             bytes_per_disk,
             bytes: (n_particles * bytes_per_disk + BASE_BYTES) * copies,

@@ -253,11 +253,14 @@ pub const BASE_BYTES: u64 = 32 << 20;
 /// note errs long, never short.
 pub const PLACEMENT_S_PER_DISK: f64 = 0.4e-6;
 
-/// What a run will hold and how long building its disks takes, estimated from the spec
-/// alone (see [`STEP_BYTES_PER_DISK`] for the measurements behind it).
+/// What a run will hold, how long building its disks takes and how many steps it
+/// takes, estimated from the spec alone (see [`STEP_BYTES_PER_DISK`] for the
+/// measurements behind it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Footprint {
     pub n_particles: u64,
+    /// Steps of the run (the event method's are the step method's with the same dt).
+    pub steps: u64,
     /// Copies of the whole state: MPI ranks each build every disk; 1 otherwise.
     pub copies: u64,
     /// Bytes per disk per copy for the method the run may use.
@@ -287,10 +290,19 @@ impl RunSpec {
             .saturating_mul(copies);
         Footprint {
             n_particles,
+            steps: self.method.steps,
             copies,
             bytes_per_disk,
             bytes,
             placement_s,
         }
+    }
+}
+
+impl Footprint {
+    /// The run's size as disks × steps: what a study's estimate of the time left weighs
+    /// its runs by (at least 1).
+    pub fn disk_steps(&self) -> u64 {
+        self.n_particles.saturating_mul(self.steps).max(1)
     }
 }

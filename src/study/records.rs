@@ -480,6 +480,65 @@ macro_rules! column_type {
 
 for_each_column!(declare_record);
 
+/// A column's value as JSON: text, a count, a number (null where not measured), true
+/// or false.
+trait ToValue {
+    fn to_value(&self) -> serde_json::Value;
+}
+
+impl ToValue for String {
+    fn to_value(&self) -> serde_json::Value {
+        serde_json::Value::from(self.as_str())
+    }
+}
+
+impl ToValue for u64 {
+    fn to_value(&self) -> serde_json::Value {
+        serde_json::Value::from(*self)
+    }
+}
+
+impl ToValue for u32 {
+    fn to_value(&self) -> serde_json::Value {
+        serde_json::Value::from(*self)
+    }
+}
+
+impl ToValue for f64 {
+    fn to_value(&self) -> serde_json::Value {
+        // NaN (not measured) has no JSON number: null.
+        serde_json::Number::from_f64(*self).map_or(serde_json::Value::Null, Into::into)
+    }
+}
+
+impl ToValue for bool {
+    fn to_value(&self) -> serde_json::Value {
+        serde_json::Value::from(*self)
+    }
+}
+
+impl ToValue for Option<u64> {
+    fn to_value(&self) -> serde_json::Value {
+        self.map_or(serde_json::Value::Null, Into::into)
+    }
+}
+
+impl Record {
+    /// The value of the column `name` as JSON (null where not measured); `None` when no
+    /// column has that name.
+    pub fn value(&self, name: &str) -> Option<serde_json::Value> {
+        macro_rules! look_up {
+            ($($kind:ident: $($column:ident $(<- $from:ident)?),*);*) => {
+                match name {
+                    $($(stringify!($column) => Some(self.$column.to_value()),)*)*
+                    _ => None,
+                }
+            };
+        }
+        for_each_column!(look_up)
+    }
+}
+
 /// The records as a table, with `schema_version` first.
 pub fn to_frame(records: &[Record]) -> PolarsResult<DataFrame> {
     macro_rules! build {

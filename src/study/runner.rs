@@ -282,8 +282,14 @@ impl Sitting<'_> {
         *interrupt_note() = kept_note(&rows);
         let kept = rows.len();
         let warm: BTreeSet<usize> = todo.iter().map(|&(_, c)| c).collect();
-        let n_runs = warm.len() * self.study.warmups as usize + todo.len();
-        let progress = progress_bar(quiet, (options.programs.len() * n_runs) as u64);
+        let size = |c: usize| self.configurations[c].footprint.disk_steps();
+        let warm_ups = warm.iter().map(|&c| (self.study.warmups as u64, size(c)));
+        let measured_runs = todo.iter().map(|&(_, c)| (1, size(c)));
+        let progress = Progress::new(
+            quiet,
+            warm_ups.chain(measured_runs),
+            options.programs.len() as u64,
+        );
         note(&self.announcement());
         let children = Children {
             exe: this_exe()?,
@@ -305,28 +311,28 @@ impl Sitting<'_> {
         let (mut measured, mut failed) = (0, 0);
         for (index, &(rep, c)) in todo.iter().enumerate() {
             if options.calibrate && (index == 0 || todo[index - 1].0 != rep) {
-                progress.set_message(format!("rep {rep}: calibration"));
+                progress.bar.set_message(format!("rep {rep}: calibration"));
                 calibrations.push(children.calibrate()?);
             }
             let key = self.configurations[c].key();
-            progress.set_message(format!("rep {rep}: {key}"));
+            progress.bar.set_message(format!("rep {rep}: {key}"));
             for program in run_order(&options.programs, rep, c) {
                 let record = self.measure(&children, program, rep, c, &key);
                 if record.status == STATUS_OK {
                     measured += 1;
                 } else {
                     failed += 1;
-                    progress.suspend(|| eprintln!("run failed: {key}: {}", record.error));
+                    (progress.bar).suspend(|| eprintln!("run failed: {key}: {}", record.error));
                 }
                 rows.push(record);
                 let mut interrupted = interrupt_note();
                 records::write(&self.results, &rows)?;
                 *interrupted = kept_note(&rows);
                 drop(interrupted);
-                progress.inc(1);
+                progress.ran(size(c));
             }
         }
-        progress.finish_and_clear();
+        progress.bar.finish_and_clear();
         self.finish(todo, rows, kept, (measured, failed), calibrations)
     }
 
@@ -640,14 +646,14 @@ impl Children {
         scene_files: &[PathBuf],
         warm: &BTreeSet<usize>,
         warmups: u32,
-        progress: &ProgressBar,
+        progress: &Progress,
     ) {
         for &c in warm {
             for program in programs {
                 for _ in 0..warmups {
-                    progress.set_message(format!("warm-up {}", configurations[c].key()));
+                    (progress.bar).set_message(format!("warm-up {}", configurations[c].key()));
                     let _ = self.simulate(program, configurations[c], &scene_files[c]);
-                    progress.inc(1);
+                    progress.ran(configurations[c].footprint.disk_steps());
                 }
             }
         }
@@ -742,20 +748,52 @@ fn note_configurations(
     }
 }
 
-/// The study's progress bar over `total` runs (hidden when quiet).
-fn progress_bar(quiet: bool, total: u64) -> ProgressBar {
-    let progress = if quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(total)
-    };
-    progress.set_style(
-        ProgressStyle::with_template(
-            "{bar:30} {pos}/{len} runs, {elapsed} gone, ~{eta} left  {msg}",
-        )
-        .expect("a valid progress template"),
-    );
-    progress
+/// The study's progress bar: runs done of all, and the time left as the disk-steps
+/// (disks × steps) still to run at the rate of those run so far, so that a run of 10⁶
+/// disks weighs a thousand times one of 10³ (hidden when quiet).
+struct Progress {
+    bar: ProgressBar,
+    runs: u64,
+    done: std::cell::Cell<u64>,
+}
+
+impl Progress {
+    /// A bar over `runs` ((count, disk-steps of each) pairs), each run by `programs`
+    /// programs.
+    fn new(quiet: bool, runs: impl Iterator<Item = (u64, u64)>, programs: u64) -> Progress {
+        let (count, disk_steps) = runs.fold((0, 0u64), |(count, total), (runs, size)| {
+            (
+                count + runs,
+                total.saturating_add(runs.saturating_mul(size)),
+            )
+        });
+        let bar = match quiet {
+            true => ProgressBar::hidden(),
+            false => ProgressBar::new(disk_steps.saturating_mul(programs)),
+        };
+        bar.set_style(
+            ProgressStyle::with_template("{bar:30} {prefix}, {elapsed} gone, ~{eta} left  {msg}")
+                .expect("a valid progress template"),
+        );
+        let progress = Progress {
+            bar,
+            runs: count * programs,
+            done: std::cell::Cell::new(0),
+        };
+        progress.show_count();
+        progress
+    }
+
+    /// One more run done, of `disk_steps`.
+    fn ran(&self, disk_steps: u64) {
+        self.done.set(self.done.get() + 1);
+        self.show_count();
+        self.bar.inc(disk_steps);
+    }
+
+    fn show_count(&self) {
+        (self.bar).set_prefix(format!("{}/{} runs", self.done.get(), self.runs));
+    }
 }
 
 /// Records the load average at the study's end in the rows measured now (from

@@ -1,5 +1,6 @@
-//! Pictures of a scene: the disks drawn to scale in their box, coloured by speed — a
-//! PNG of one state (the seed's Figure 4) or an animated GIF of a run.
+//! Pictures of a scene: the disks drawn to scale in their box, coloured by speed, with
+//! the key of the colours below — a PNG of one state (the seed's Figure 4) or an
+//! animated GIF of a run.
 
 use std::path::Path;
 
@@ -9,6 +10,8 @@ use plotters::prelude::*;
 use crate::system::output::{Canvas, write_gif, write_png};
 
 use crate::draw::raster::{fast_speed, speed_rgb};
+use crate::report::figures::{FONT, register_font};
+use crate::report::units::significant;
 use crate::run::spec::PreparedRun;
 use crate::sim::engine::Engine;
 use crate::sim::{Boundary, Particles, Scene};
@@ -17,6 +20,10 @@ use crate::sim::{Boundary, Particles, Scene};
 const LONG_SIDE_PX: f64 = 800.0;
 /// Pixels of margin around the box.
 const MARGIN_PX: f64 = 10.0;
+/// Pixels below the box's margin for the colour key.
+const KEY_PX: f64 = 40.0;
+/// Width and height of the key's colour bar, in pixels.
+const KEY_BAR_PX: (i32, i32) = (240, 12);
 /// Hundredths of a second between the frames of a GIF.
 const FRAME_DELAY_CS: u16 = 6;
 
@@ -34,7 +41,7 @@ impl Frame {
         let scale = LONG_SIDE_PX / w.max(h);
         let size = (
             (w * scale + 2.0 * MARGIN_PX).ceil() as u32,
-            (h * scale + 2.0 * MARGIN_PX).ceil() as u32,
+            (h * scale + 2.0 * MARGIN_PX + KEY_PX).ceil() as u32,
         );
         Frame {
             scale,
@@ -50,6 +57,39 @@ impl Frame {
             (MARGIN_PX + (self.height - y) * self.scale).round() as i32,
         )
     }
+}
+
+/// The key below the box: the colour bar from rest to `fast`, its ends and middle
+/// labelled, and what it measures in which units.
+fn draw_key(area: &Canvas<'_>, frame: &Frame, fast: f64) -> anyhow::Result<()> {
+    register_font();
+    let (width, height) = KEY_BAR_PX;
+    let left = MARGIN_PX as i32;
+    let top = (frame.size.1 as f64 - KEY_PX) as i32;
+    for column in 0..width {
+        let speed = fast * f64::from(column) / f64::from(width - 1);
+        let bar = [(left + column, top), (left + column + 1, top + height)];
+        area.draw(&Rectangle::new(bar, speed_colour(speed, fast).filled()))
+            .map_err(|e| anyhow!("{e}"))?;
+    }
+    let style = (FONT, 13).into_font().color(&BLACK);
+    let labels = [(0.0, 0), (0.5, width / 2 - 10), (1.0, width - 24)];
+    for (fraction, at) in labels {
+        let label = significant(fraction * fast, 3);
+        area.draw(&Text::new(
+            label,
+            (left + at, top + height + 2),
+            style.clone(),
+        ))
+        .map_err(|e| anyhow!("{e}"))?;
+    }
+    let what = format!(
+        "speed, in the scene's lengths per unit of time: blue at rest, red from {} (twice the rms speed) up",
+        significant(fast, 3)
+    );
+    area.draw(&Text::new(what, (left + width + 12, top), style))
+        .map_err(|e| anyhow!("{e}"))?;
+    Ok(())
 }
 
 /// Blue (at rest) through red (at `fast` and above), the live view's colours.
@@ -85,7 +125,7 @@ fn draw_state(
         ))
         .map_err(|e| anyhow!("{e}"))?;
     }
-    Ok(())
+    draw_key(area, &frame, fast)
 }
 
 /// Writes a PNG of the disks after all the run's steps.

@@ -1,16 +1,20 @@
 //! The scaling figures of one setup: time, speedup, efficiency and steps per second
 //! against workers, and for runs that drew every step the frames per second with
-//! drawing beside their steps per second; one colour per backend in every figure, error
-//! bars from the repetitions, log axes.
+//! drawing beside their steps per second; one colour per backend in every figure,
+//! backends at one worker count side by side, error bars from the repetitions, log axes
+//! (efficiency, a fraction, on a linear one), titles that name the setup.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::anyhow;
 use plotters::coord::combinators::WithKeyPoints;
+use plotters::coord::ranged1d::ValueFormatter;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::report::analysis::{BackendScaling, Setup};
 use crate::report::figures::{Analysed, Chart, FONT, Link, PALETTE, draw_legend, write};
+use crate::report::units::significant;
 use crate::run::backend_kind::BackendKind;
 use crate::study::manifest::Scaling;
 use crate::system::output::Canvas;
@@ -52,7 +56,7 @@ impl Figure {
             Figure::Time => "time",
             Figure::Speedup => "speedup",
             Figure::Efficiency => "efficiency",
-            Figure::Fps => "fps",
+            Figure::Fps => "steps-per-s",
             Figure::Drawing => "fps-drawing",
         }
     }
@@ -185,34 +189,45 @@ fn colour(backend: &str) -> RGBColor {
     }
 }
 
-/// Ticks of a log axis over `low..high` at 1, 2 and 5 times the powers of ten, so that a
-/// range narrower than a decade still gets several labels; only the powers of ten when
-/// that would make more than [`MAX_LOG_TICKS`].
+/// Ticks of a log axis over `low..high`: the first of these mantissas times the powers
+/// of ten that gives at least [`MIN_TICKS`] ticks and at most [`MAX_LOG_TICKS`] (the
+/// finest that does not exceed it, when none gives both), so that a range narrower than
+/// a decade still gets several labels and a wide one is not crowded.
 fn log_ticks(low: f64, high: f64) -> Vec<f64> {
-    let mut ticks = Vec::new();
-    let mut decade = 10_f64.powf(low.log10().floor());
-    while decade <= high {
-        for mantissa in [1.0, 2.0, 5.0] {
-            let tick = mantissa * decade;
-            if (low..=high).contains(&tick) {
-                ticks.push((mantissa, tick));
-            }
+    const MANTISSAS: [&[f64]; 4] = [
+        &[1.0],
+        &[1.0, 2.0, 5.0],
+        &[1.0, 1.5, 2.0, 3.0, 5.0, 7.0],
+        &[1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0],
+    ];
+    let ticks_of = |mantissas: &[f64]| {
+        let mut ticks = Vec::new();
+        let mut decade = 10_f64.powf(low.log10().floor());
+        while decade <= high {
+            let in_range = mantissas.iter().map(|m| m * decade).filter(|t| (low..=high).contains(t));
+            ticks.extend(in_range);
+            decade *= 10.0;
         }
-        decade *= 10.0;
+        ticks
+    };
+    let mut fitting = Vec::new();
+    for mantissas in MANTISSAS {
+        let ticks = ticks_of(mantissas);
+        if ticks.len() > MAX_LOG_TICKS && !fitting.is_empty() {
+            break;
+        }
+        fitting = ticks;
+        if fitting.len() >= MIN_TICKS {
+            break;
+        }
     }
-    if ticks.len() > MAX_LOG_TICKS {
-        ticks.retain(|&(mantissa, _)| mantissa == 1.0);
-    }
-    ticks.into_iter().map(|(_, tick)| tick).collect()
+    fitting
 }
 
-const MAX_LOG_TICKS: usize = 8;
-
-/// A tick value with as many decimals as it needs (0.002, 0.5, 20, 5000).
-fn tick_label(value: f64) -> String {
-    let decimals = (-value.log10().floor()).max(0.0) as usize;
-    format!("{value:.decimals$}")
-}
+const MIN_TICKS: usize = 4;
+/// The narrowest log value axis, high over low: wide enough for [`MIN_TICKS`] labels.
+const MIN_LOG_RATIO: f64 = 3.0;
+const MAX_LOG_TICKS: usize = 12;
 
 fn draw(figure: Figure, setup: &Setup, root: &Canvas<'_>) -> anyhow::Result<()> {
     let backends: Vec<&BackendScaling> = setup
@@ -228,51 +243,105 @@ fn draw(figure: Figure, setup: &Setup, root: &Canvas<'_>) -> anyhow::Result<()> 
     workers.dedup();
     let max_workers = workers.last().copied().unwrap_or(1).max(2) as f64;
     let (y_low, y_high) = y_range(figure, &backends, max_workers);
-
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    // Ticks at the measured worker counts: a log axis' own ticks skip most of them.
+    let x_ticks: Vec<f64> = workers.iter().map(|&p| p as f64).collect();
+    let x = (0.8_f64..max_workers * 1.25)
+        .log_scale()
+        .with_key_points(x_ticks);
+    let plot = Plot {
+        figure,
+        setup,
+        backends: &backends,
+        max_workers,
+    };
+    match figure {
+        // A fraction of the ideal, read against 100% and the 75% line: linear from 0.
+        Figure::Efficiency => {
+            let y: RangedCoordf64 = (y_low..y_high).into();
+            plot.draw(root, x, y, &|y| format!("{:.0}%", 100.0 * y))
+        }
+        _ => {
+            let y = (y_low..y_high)
+                .log_scale()
+                .with_key_points(log_ticks(y_low, y_high));
+            plot.draw(root, x, y, &|y| significant(*y, 3))
+        }
+    }
+}
+
+/// The title of `figure` for `setup`: what it plots, then the setup's scene and every
+/// value that tells it from the study's other setups (n, packing, steps, dt, settings).
+fn caption(figure: Figure, setup: &Setup) -> String {
     let n = match setup.scaling {
         Scaling::Strong => format!("n = {}", setup.n),
         Scaling::Weak => format!("n = {} per worker", setup.n),
     };
-    let caption = format!(
-        "{}: {} ({n}, {} steps)",
-        figure.title(),
-        setup.scene,
-        setup.steps
-    );
-    // Ticks at the measured worker counts: a log axis' own ticks skip most of them.
-    let x_ticks: Vec<f64> = workers.iter().map(|&p| p as f64).collect();
-    let mut chart = ChartBuilder::on(root)
-        .caption(caption, (FONT, 24))
-        .margin(16)
-        .x_label_area_size(50)
-        .y_label_area_size(80)
-        .build_cartesian_2d(
-            (0.8_f64..max_workers * 1.25)
-                .log_scale()
-                .with_key_points(x_ticks),
-            (y_low..y_high)
-                .log_scale()
-                .with_key_points(log_ticks(y_low, y_high)),
-        )
-        .map_err(|e| anyhow!("{e}"))?;
-    chart
-        .configure_mesh()
-        .x_desc("workers (threads or ranks, log scale)")
-        .y_desc(figure.axis(setup.scaling))
-        .axis_desc_style((FONT, 18))
-        .label_style((FONT, 15))
-        .light_line_style(BLACK.mix(0.04))
-        .x_label_formatter(&|x| format!("{x:.0}"))
-        .y_label_formatter(&|y| tick_label(*y))
-        .draw()
-        .map_err(|e| anyhow!("{e}"))?;
-    draw_reference(&mut chart, figure, max_workers)?;
-    for backend in backends {
-        draw_backend(&mut chart, figure, backend)?;
-    }
-    draw_legend(&mut chart, figure.legend_position(), 15)
+    let mut words = vec![
+        n,
+        format!("packing {}", significant(setup.packing, 3)),
+        format!("{} steps of dt {}", setup.steps, significant(setup.dt, 3)),
+    ];
+    words.extend(setup.settings.iter().cloned());
+    format!("{}: {}, {}", figure.title(), setup.scene, words.join(", "))
 }
+
+/// One scaling figure's content, drawn on either kind of value axis.
+struct Plot<'s> {
+    figure: Figure,
+    setup: &'s Setup,
+    backends: &'s [&'s BackendScaling],
+    max_workers: f64,
+}
+
+impl Plot<'_> {
+    fn draw<Y>(
+        &self,
+        root: &Canvas<'_>,
+        x: WithKeyPoints<LogCoord<f64>>,
+        y: Y,
+        y_label: &dyn Fn(&f64) -> String,
+    ) -> anyhow::Result<()>
+    where
+        Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    {
+        let figure = self.figure;
+        let mut chart = ChartBuilder::on(root)
+            .caption(caption(figure, self.setup), (FONT, 20))
+            .margin(16)
+            .x_label_area_size(50)
+            .y_label_area_size(80)
+            .build_cartesian_2d(x, y)
+            .map_err(|e| anyhow!("{e}"))?;
+        chart
+            .configure_mesh()
+            .x_desc("workers (threads or ranks, log scale; backends side by side at each count)")
+            .y_desc(figure.axis(self.setup.scaling))
+            .axis_desc_style((FONT, 18))
+            .label_style((FONT, 15))
+            .light_line_style(BLACK.mix(0.04))
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .y_label_formatter(y_label)
+            .draw()
+            .map_err(|e| anyhow!("{e}"))?;
+        draw_reference(&mut chart, figure, self.max_workers)?;
+        for (index, backend) in self.backends.iter().enumerate() {
+            let shift = dodge(index, self.backends.len());
+            draw_backend(&mut chart, figure, backend, shift)?;
+        }
+        draw_legend(&mut chart, figure.legend_position(), 15)
+    }
+}
+
+/// The factor backend `index` of `count` multiplies its worker counts by, so that points
+/// of several backends at one count stand side by side instead of on top of each other
+/// (a fixed distance on the log axis).
+fn dodge(index: usize, count: usize) -> f64 {
+    DODGE.powf(index as f64 - (count.max(1) - 1) as f64 / 2.0)
+}
+
+/// The ratio between neighbouring backends' positions at one worker count.
+const DODGE: f64 = 1.04;
 
 /// The value axis of a figure over `backends`: every drawn value, with room above and
 /// below (the ideal speedup up to `max_workers`, and 100% efficiency, always show).
@@ -292,17 +361,21 @@ fn y_range(figure: Figure, backends: &[&BackendScaling], max_workers: f64) -> (f
         (low, high) = (0.1, 1.0);
     }
     match figure {
-        // The ideal line reaches p; the 75% line and 100% must show.
+        // The ideal line reaches p.
         Figure::Speedup => high = high.max(max_workers),
-        Figure::Efficiency => high = high.max(1.0),
+        // A linear axis from 0 to a little above 100% (or the highest efficiency).
+        Figure::Efficiency => return (0.0, high.max(1.0) * 1.1),
         _ => {}
     }
-    (low / 1.5, high * 1.5)
+    let (low, high) = (low / 1.5, high * 1.5);
+    // Wide enough for four tick labels (see `log_ticks`).
+    let widen = (MIN_LOG_RATIO / (high / low)).max(1.0).sqrt();
+    (low / widen, high * widen)
 }
 
 /// The reference line of a figure: the ideal speedup S = p, or 75% efficiency.
-fn draw_reference(
-    chart: &mut Chart2d<'_, '_>,
+fn draw_reference<Y: Ranged<ValueType = f64>>(
+    chart: &mut Chart2d<'_, '_, Y>,
     figure: Figure,
     max_workers: f64,
 ) -> anyhow::Result<()> {
@@ -320,17 +393,18 @@ fn draw_reference(
 }
 
 /// One backend's series: its values with their ranges, and the values drawn beside
-/// them (dashed), in the backend's colour.
-fn draw_backend(
-    chart: &mut Chart2d<'_, '_>,
+/// them (dashed), in the backend's colour, each at its worker count times `shift`.
+fn draw_backend<Y: Ranged<ValueType = f64>>(
+    chart: &mut Chart2d<'_, '_, Y>,
     figure: Figure,
     backend: &BackendScaling,
+    shift: f64,
 ) -> anyhow::Result<()> {
     let colour = colour(&backend.backend);
     let points: Vec<(f64, (f64, f64, f64))> = backend
         .points
         .iter()
-        .map(|p| (p.workers as f64, figure.values(p)))
+        .map(|p| (p.workers as f64 * shift, figure.values(p)))
         .filter(|(_, (_, mid, _))| mid.is_finite() && *mid > 0.0)
         .collect();
     chart
@@ -347,7 +421,7 @@ fn draw_backend(
     let beside: Vec<(f64, f64)> = backend
         .points
         .iter()
-        .filter_map(|p| Some((p.workers as f64, figure.beside(p)?)))
+        .filter_map(|p| Some((p.workers as f64 * shift, figure.beside(p)?)))
         .filter(|(_, value)| value.is_finite() && *value > 0.0)
         .collect();
     if !beside.is_empty() {
@@ -386,12 +460,8 @@ fn draw_backend(
     Ok(())
 }
 
-/// The chart of a scaling figure: log workers against a log value.
-type Chart2d<'a, 'b> = ChartContext<
-    'a,
-    BitMapBackend<'b>,
-    Cartesian2d<WithKeyPoints<LogCoord<f64>>, WithKeyPoints<LogCoord<f64>>>,
->;
+/// The chart of a scaling figure: log workers against a value axis `Y`.
+type Chart2d<'a, 'b, Y> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<WithKeyPoints<LogCoord<f64>>, Y>>;
 
 #[cfg(test)]
 mod tests {
@@ -400,14 +470,50 @@ mod tests {
     #[test]
     fn log_ticks_label_narrow_ranges_and_thin_out_wide_ones() {
         let narrow = log_ticks(4.0, 25.0);
-        assert_eq!(narrow.len(), 3);
-        for (tick, expected) in narrow.iter().zip([5.0, 10.0, 20.0]) {
+        for (tick, expected) in narrow.iter().zip([5.0, 7.0, 10.0, 15.0, 20.0]) {
             assert!((tick - expected).abs() < 1e-9, "{narrow:?}");
         }
+        assert_eq!(narrow.len(), 5, "{narrow:?}");
         let wide = log_ticks(0.0015, 300.0);
         assert_eq!(wide.len(), 5, "{wide:?}");
-        assert_eq!(tick_label(0.002), "0.002");
-        assert_eq!(tick_label(0.5), "0.5");
-        assert_eq!(tick_label(20.0), "20");
+        // Every range a figure draws, at least a factor of 3 wide ([`MIN_LOG_RATIO`]),
+        // has at least four labels, and none more than twelve.
+        for low in [0.9, 1.3, 4.4, 9.5, 13.0, 17.0, 19_000.0, 21_000.0, 0.00045] {
+            for widening in [3.0, 4.5, 10.0, 100.0, 5000.0, 1e5] {
+                let ticks = log_ticks(low, low * widening);
+                assert!((MIN_TICKS..=MAX_LOG_TICKS).contains(&ticks.len()), "{low}: {ticks:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn backends_at_one_worker_count_stand_apart_and_efficiency_is_linear_from_zero() {
+        assert_eq!(dodge(0, 1), 1.0);
+        assert!(dodge(0, 2) < 1.0 && dodge(1, 2) > 1.0);
+        assert!((dodge(0, 3) * dodge(2, 3) - 1.0).abs() < 1e-12);
+        let (low, high) = y_range(Figure::Efficiency, &[], 4.0);
+        assert_eq!(low, 0.0);
+        assert!((1.0..1.2).contains(&high), "{high}");
+    }
+
+    #[test]
+    fn a_title_names_the_setup_and_what_tells_it_apart() {
+        let setup = Setup {
+            scene: "gas".into(),
+            scaling: Scaling::Strong,
+            n: 100_000,
+            steps: 100,
+            dt: 0.02264154330493038,
+            packing: 0.4,
+            broadphase: "grid".into(),
+            drawn: false,
+            settings: vec!["tc=0".into()],
+            backends: Vec::new(),
+            distinct_hashes: 1,
+        };
+        assert_eq!(
+            caption(Figure::Speedup, &setup),
+            "Speedup: gas, n = 100000, packing 0.4, 100 steps of dt 0.0226, tc=0"
+        );
     }
 }
