@@ -191,8 +191,8 @@ pub struct Accuracy {
     pub collapse: Option<Collapse>,
     /// [t, kinetic energy per disk] at t = 0 and at up to [`CURVE_SAMPLES`] steps.
     pub temperature_curve: Option<Vec<[f64; 2]>>,
-    /// The run's observables in up to `SERIES_BLOCKS` blocks (serial and rayon: the same
-    /// bits).
+    /// The run's observables in up to `SERIES_BLOCKS` blocks (serial, rayon and MPI: the
+    /// same bits).
     pub series: Option<Vec<Block>>,
 }
 
