@@ -29,6 +29,15 @@ fn mpi_at_1_2_3_and_4_ranks_gives_the_serial_hash() {
                         "{name} {ranks} ranks"
                     );
                     assert_eq!(mpi["pair_collisions"], serial["pair_collisions"], "{name}");
+                    // The ranks' exact sums and block series, read back by the launcher
+                    // to the bit.
+                    for field in [
+                        "kinetic_energy_final",
+                        "momentum_final",
+                        "compressibility_z",
+                    ] {
+                        assert_eq!(mpi[field], serial[field], "{name} {ranks} ranks: {field}");
+                    }
                     assert_eq!(mpi["ranks"].as_u64(), Some(ranks.parse().unwrap()));
                     assert_eq!(mpi["backend"], "mpi");
                 }
@@ -103,6 +112,15 @@ fn mpi_gives_the_serial_hash_for_a_pile_resting_under_gravity() {
             mpi["max_wall_penetration"], serial["max_wall_penetration"],
             "{ranks} ranks"
         );
+        for field in [
+            "kinetic_energy_final",
+            "compressibility_z",
+            "compressibility_z_se",
+            "temperature",
+            "equilibration_cut_time",
+        ] {
+            assert_eq!(mpi[field], serial[field], "{ranks} ranks: {field}");
+        }
     }
 }
 
