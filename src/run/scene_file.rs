@@ -593,7 +593,7 @@ impl Validator<'_> {
                             "is {value}, outside (0, {limit:.3}], the range {} placement reaches",
                             placement.name()
                         ),
-                        "random sequential addition jams near 0.547 and a square lattice holds at most π/4; \
+                        "random addition jams past 0.51 and a square lattice holds at most π/4; \
                          lower the packing, or use placement = \"lattice\" for dense scenes",
                     ));
                 }

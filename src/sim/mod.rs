@@ -17,6 +17,7 @@ pub mod observe;
 pub mod particles;
 pub mod pieces;
 pub mod pilot;
+pub mod place;
 pub mod prefetch;
 pub mod resolve;
 pub mod scene;
