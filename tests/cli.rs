@@ -280,24 +280,31 @@ fn rayon_prints_the_serial_hash_and_its_worker_counts() {
 
 #[test]
 fn a_jammed_random_placement_fails_fast_instead_of_looping() {
-    // Random sequential addition cannot reach 0.54 in any reasonable number of tries.
     let dir = tempfile::tempdir().unwrap();
-    let path = scene_file(
-        dir.path(),
-        "jam.toml",
-        "[scene]\nn = 2000\npacking = 0.54\n[method]\nsteps = 1\n",
-    );
-    let started = Instant::now();
-    let out = collide(&["simulate", path.to_str().unwrap()]);
-    assert!(!out.status.success());
-    assert!(
-        started.elapsed() < Duration::from_secs(10),
-        "took {:?}",
-        started.elapsed()
-    );
-    let stderr = String::from_utf8(out.stderr).unwrap();
-    assert!(
-        stderr.contains("jammed") && stderr.contains("lattice"),
-        "{stderr}"
-    );
+    // A packing random addition cannot reach is refused before any try; a box too
+    // narrow for one disk jams at the first disk.
+    for (name, scene, says) in [
+        ("dense.toml", "n = 2000\npacking = 0.54", "scene.packing"),
+        (
+            "narrow.toml",
+            "n = 10\nsize = [1.5, 1000.0]",
+            "jammed at disk 0",
+        ),
+    ] {
+        let text = format!("[scene]\n{scene}\n[method]\nsteps = 1\n");
+        let path = scene_file(dir.path(), name, &text);
+        let started = Instant::now();
+        let out = collide(&["simulate", path.to_str().unwrap()]);
+        assert!(!out.status.success());
+        assert!(
+            started.elapsed() < Duration::from_secs(10),
+            "took {:?}",
+            started.elapsed()
+        );
+        let stderr = String::from_utf8(out.stderr).unwrap();
+        assert!(
+            stderr.contains(says) && stderr.contains("lattice"),
+            "{stderr}"
+        );
+    }
 }

@@ -9,11 +9,11 @@ use std::borrow::Cow;
 use crate::run::spec::{
     DEFAULT_DT_FRACTION, DtChoice, Method, MethodChoice, MethodSpec, SceneSource,
 };
-use crate::sim::Scene;
 use crate::sim::event::EventParams;
 use crate::sim::pilot::{StepPilot, event_pilot, step_pilot};
 use crate::sim::scene::{Extent, PlacementError};
 use crate::sim::step::auto_dt;
+use crate::sim::{DiskFigures, Scene};
 
 /// The dt fractions tried, largest first: v_max·dt = f·r_min for f = 4, 2, 1, ½, … 1/128.
 const LADDER_TOP: f64 = 4.0;
@@ -115,24 +115,28 @@ pub struct Choice {
 
 /// Resolves `method` and `dt` for `scene` (built from `source`); `event` is the event
 /// method's resolved settings, used by its pilot.
+///
+/// `figures` are the whole scene's; `scene` may hold only some of its disks (a rank's)
+/// when the choice needs no pilot ([`needs_pilots`]).
 pub fn choose(
     source: &SceneSource,
     scene: &Scene,
+    figures: &DiskFigures,
     spec: &MethodSpec,
     event: EventParams,
 ) -> Result<Choice, PlacementError> {
-    if let Some(choice) = without_pilots(scene, spec) {
+    if let Some(choice) = without_pilots(scene, figures, spec) {
         return Ok(choice);
     }
     let pilot_scene = pilot_scene(source, scene)?;
     let pilot_scene = pilot_scene.as_ref();
     let time = auto_dt(
-        &pilot_scene.particles,
+        &pilot_scene.particles.figures(),
         &pilot_scene.domain,
         &pilot_scene.physics,
         PILOT_RADII,
     );
-    let (step, pilot, dt_note) = step_choice(scene, pilot_scene, spec, time);
+    let (step, pilot, dt_note) = step_choice(scene, figures, pilot_scene, spec, time);
     let pilots = Pilots {
         notes: format!(
             "{dt_note}{}",
@@ -151,19 +155,32 @@ pub fn choose(
     Ok(method_auto(scene, spec, event, step, &pilots))
 }
 
-/// The step method at `fraction` (v_max·dt = fraction·r_min) of `scene`.
-fn fraction_dt(scene: &Scene, fraction: f64) -> Choice {
+/// The step method at `fraction` (v_max·dt = fraction·r_min) of `scene`, whose disks
+/// have `figures`.
+fn fraction_dt(scene: &Scene, figures: &DiskFigures, fraction: f64) -> Choice {
     Choice {
         method: Method::Step,
-        dt: auto_dt(&scene.particles, &scene.domain, &scene.physics, fraction),
+        dt: auto_dt(figures, &scene.domain, &scene.physics, fraction),
         dt_auto_fraction: Some(fraction),
         reason: None,
     }
 }
 
-/// The choices that need no pilot: a fixed method with a fixed dt or a dt rule, and the
-/// event method under a tolerance (it misses nothing).
-fn without_pilots(scene: &Scene, spec: &MethodSpec) -> Option<Choice> {
+/// Whether choosing the method or dt runs pilots on the whole scene: all but a fixed
+/// method with a fixed dt or a dt rule, and the event method under a tolerance (it
+/// misses nothing).
+pub fn needs_pilots(spec: &MethodSpec) -> bool {
+    !matches!(
+        (spec.method, spec.dt),
+        (
+            MethodChoice::Fixed(_),
+            DtChoice::Fixed(_) | DtChoice::Auto { .. }
+        ) | (MethodChoice::Fixed(Method::Event), DtChoice::Tolerance)
+    )
+}
+
+/// The choices that need no pilot ([`needs_pilots`]).
+fn without_pilots(scene: &Scene, figures: &DiskFigures, spec: &MethodSpec) -> Option<Choice> {
     match (spec.method, spec.dt) {
         (MethodChoice::Fixed(method), DtChoice::Fixed(dt)) => Some(Choice {
             method,
@@ -173,7 +190,7 @@ fn without_pilots(scene: &Scene, spec: &MethodSpec) -> Option<Choice> {
         }),
         (MethodChoice::Fixed(method), DtChoice::Auto { fraction }) => Some(Choice {
             method,
-            ..fraction_dt(scene, fraction)
+            ..fraction_dt(scene, figures, fraction)
         }),
         (MethodChoice::Fixed(Method::Event), DtChoice::Tolerance) => Some(Choice {
             method: Method::Event,
@@ -181,7 +198,7 @@ fn without_pilots(scene: &Scene, spec: &MethodSpec) -> Option<Choice> {
                 "dt auto: the event method misses no collisions, so dt is the dt_fraction rule \
                  (v_max·dt = {DEFAULT_DT_FRACTION}·r_min)"
             )),
-            ..fraction_dt(scene, DEFAULT_DT_FRACTION)
+            ..fraction_dt(scene, figures, DEFAULT_DT_FRACTION)
         }),
         _ => None,
     }
@@ -191,6 +208,7 @@ fn without_pilots(scene: &Scene, spec: &MethodSpec) -> Option<Choice> {
 /// `pilot_time`), and a note on how dt was chosen.
 fn step_choice(
     scene: &Scene,
+    figures: &DiskFigures,
     pilot_scene: &Scene,
     spec: &MethodSpec,
     pilot_time: f64,
@@ -208,9 +226,9 @@ fn step_choice(
             (choice, pilot, String::new())
         }
         DtChoice::Auto { fraction } => {
-            let choice = fraction_dt(scene, fraction);
+            let choice = fraction_dt(scene, figures, fraction);
             let dt = auto_dt(
-                &pilot_scene.particles,
+                &pilot_scene.particles.figures(),
                 &pilot_scene.domain,
                 &pilot_scene.physics,
                 fraction,
@@ -227,7 +245,7 @@ fn step_choice(
                 "the smallest tried, still above"
             };
             let note = format!("dt auto: v_max·dt = {fraction}·r_min, {verdict} the tolerance; ",);
-            (fraction_dt(scene, fraction), pilot, note)
+            (fraction_dt(scene, figures, fraction), pilot, note)
         }
     }
 }
@@ -341,7 +359,12 @@ fn largest_passing_fraction(scene: &Scene, spec: &MethodSpec) -> (f64, StepPilot
     let mut last = None;
     for k in 0..LADDER_RUNGS {
         let fraction = LADDER_TOP * 2f64.powi(-k);
-        let dt = auto_dt(&scene.particles, &scene.domain, &scene.physics, fraction);
+        let dt = auto_dt(
+            &scene.particles.figures(),
+            &scene.domain,
+            &scene.physics,
+            fraction,
+        );
         let steps = ((PILOT_RADII / fraction).ceil() as u64).clamp(1, MAX_PILOT_STEPS);
         let pilot = step_pilot(scene, dt, steps, spec.broadphase);
         if pilot.missed_fraction() <= spec.missed_tolerance {

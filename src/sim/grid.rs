@@ -6,7 +6,7 @@
 
 use std::ops::{Range, RangeInclusive};
 
-use super::particles::{Particles, ReorderScratch};
+use super::particles::{DiskFigures, Particles, ReorderScratch};
 use super::pieces::Pieces;
 use super::scene::{Boundary, Domain, minimum_image};
 
@@ -131,16 +131,21 @@ impl StripLayout {
     /// Strips at least `2 · max_radius + skin` tall, for pairs closer than their radii
     /// plus `skin` (a neighbour list's candidates). A skin of 0 is [`StripLayout::new`].
     pub fn with_skin(domain: &Domain, particles: &Particles, skin: f64) -> StripLayout {
-        let max_radius = particles.max_radius();
+        StripLayout::for_figures(domain, &particles.figures(), skin)
+    }
+
+    /// [`StripLayout::with_skin`] for a scene of these figures.
+    pub fn for_figures(domain: &Domain, figures: &DiskFigures, skin: f64) -> StripLayout {
+        let max_radius = figures.max_radius;
         let contact = 2.0 * max_radius + skin;
-        let n_particles = particles.len();
+        let n_particles = figures.n_disks;
         let n_strips = ((domain.height / contact).floor() as usize).clamp(1, n_particles.max(3));
         StripLayout {
             n_strips,
             inv_strip_height: n_strips as f64 / domain.height,
             width: domain.width,
             reach: contact * (1.0 + 1e-9),
-            equal_radius: (particles.min_radius() == max_radius).then_some(max_radius),
+            equal_radius: (figures.min_radius == max_radius).then_some(max_radius),
             max_radius,
         }
     }

@@ -26,6 +26,6 @@ pub mod snapshot;
 pub mod step;
 
 pub use counters::StepCounters;
-pub use particles::{Disk, DiskSlices, Particles, PerDisk, PerDiskSlice};
+pub use particles::{Disk, DiskFigures, DiskSlices, Particles, PerDisk, PerDiskSlice};
 pub use scene::{Boundary, Domain, Physics, Scene};
 pub use step::{Broadphase, StepParams, Stepper};

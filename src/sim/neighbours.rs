@@ -16,7 +16,7 @@
 use std::ops::Range;
 
 use super::grid::{Contact, StripGrid};
-use super::particles::{Particles, ReorderScratch};
+use super::particles::{DiskFigures, Particles, ReorderScratch};
 use super::pieces::{MIN_STREAMING_PIECE, Pieces, split_at_ranges};
 use super::scene::{Boundary, Domain};
 
@@ -179,11 +179,16 @@ impl Skin {
     /// at least three to a side (no pair seen through two images). A width of 0 means
     /// the lists are rebuilt every step.
     pub fn for_scene(domain: &Domain, particles: &Particles, dt: f64) -> Skin {
-        let max_radius = particles.max_radius();
-        let packing = particles.disk_area() / domain.area();
+        Skin::for_figures(domain, &particles.figures(), dt)
+    }
+
+    /// [`Skin::for_scene`] for a scene of these figures.
+    pub fn for_figures(domain: &Domain, figures: &DiskFigures, dt: f64) -> Skin {
+        let max_radius = figures.max_radius;
+        let packing = figures.disk_area / domain.area();
         let dense = ((packing - 0.05) / (0.3 - 0.05)).clamp(0.0, 1.0);
         let radii = SKIN_RADII_DILUTE + dense * (SKIN_RADII_DENSE - SKIN_RADII_DILUTE);
-        let longest_step = particles.max_speed() * dt;
+        let longest_step = figures.max_speed * dt;
         let mut width = (radii * max_radius)
             .min(SKIN_STEPS * longest_step)
             .max(MIN_SKIN_RADII * max_radius);

@@ -14,7 +14,7 @@ use super::cells::{CellList, NONE};
 use super::counters::StepCounters;
 use super::event::contact_wait;
 use super::exact_sum::{EXACT_SUM_WORDS, ExactSum};
-use super::particles::Particles;
+use super::particles::{DiskFigures, Particles};
 use super::scene::{Domain, Physics};
 
 /// Whole-system quantities measured at one instant.
@@ -175,6 +175,99 @@ impl StateSums {
             disks: rest[0] as u64,
             hash: ((rest[1] as u64) << 32) | rest[2] as u64,
             max_radius: rest[3],
+        }
+    }
+}
+
+/// What set-up reads of the initial disks, as exact sums and extremes that merge in any
+/// order, so that ranks holding parts of a scene read the whole scene's figures to the
+/// bit: the [`StateSums`] but the hash, the area covered and Σ v² (for the packing and
+/// the rms speed), and the extremes that size strips, skins and a dt rule.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneSums {
+    pub state: StateSums,
+    area: ExactSum,
+    speed_square: ExactSum,
+    min_radius: f64,
+    max_speed: f64,
+}
+
+impl Default for SceneSums {
+    fn default() -> SceneSums {
+        SceneSums {
+            state: StateSums::default(),
+            area: ExactSum::default(),
+            speed_square: ExactSum::default(),
+            min_radius: f64::INFINITY,
+            max_speed: 0.0,
+        }
+    }
+}
+
+impl SceneSums {
+    /// The sums over every disk of `particles`, with the potential energy in `gravity`.
+    pub fn of(particles: &Particles, gravity: Option<[f64; 2]>) -> SceneSums {
+        let mut sums = SceneSums::default();
+        sums.state.disks = particles.len() as u64;
+        for idx in 0..particles.len() {
+            let state = &mut sums.state;
+            state.add_motion(particles, idx);
+            if let Some(gravity) = gravity {
+                state.potential.add(potential_of(particles, idx, gravity));
+            }
+            let (r, vx, vy) = (particles.radius[idx], particles.vx[idx], particles.vy[idx]);
+            state.max_radius = state.max_radius.max(r);
+            sums.min_radius = sums.min_radius.min(r);
+            sums.max_speed = sums.max_speed.max(vx.hypot(vy));
+            sums.area.add(std::f64::consts::PI * r * r);
+            sums.speed_square.add(vx * vx);
+            sums.speed_square.add(vy * vy);
+        }
+        sums
+    }
+
+    /// Adds the sums of other disks.
+    pub fn merge(&mut self, other: &SceneSums) {
+        self.state.merge(&other.state);
+        self.area.merge(&other.area);
+        self.speed_square.merge(&other.speed_square);
+        self.min_radius = self.min_radius.min(other.min_radius);
+        self.max_speed = self.max_speed.max(other.max_speed);
+    }
+
+    /// The sums as exact `f64`s, to send between ranks.
+    pub fn to_words(&self) -> Vec<f64> {
+        let mut words = self.state.to_words();
+        words.extend(self.area.to_words());
+        words.extend(self.speed_square.to_words());
+        words.extend([self.min_radius, self.max_speed]);
+        words
+    }
+
+    pub fn from_words(words: &[f64]) -> SceneSums {
+        let rest = &words[STATE_SUMS_WORDS..];
+        let extremes = &rest[2 * EXACT_SUM_WORDS..];
+        SceneSums {
+            state: StateSums::from_words(words),
+            area: ExactSum::from_words(rest),
+            speed_square: ExactSum::from_words(&rest[EXACT_SUM_WORDS..]),
+            min_radius: extremes[0],
+            max_speed: extremes[1],
+        }
+    }
+
+    /// √⟨v²⟩ over the disks, 0 for none.
+    pub fn rms_speed(&self) -> f64 {
+        (self.speed_square.value() / self.state.disks.max(1) as f64).sqrt()
+    }
+
+    pub fn figures(&self) -> DiskFigures {
+        DiskFigures {
+            n_disks: self.state.disks as usize,
+            disk_area: self.area.value(),
+            max_radius: self.state.max_radius,
+            min_radius: self.min_radius,
+            max_speed: self.max_speed,
         }
     }
 }

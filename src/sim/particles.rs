@@ -788,6 +788,29 @@ impl Particles {
             .map(|(vx, vy)| vx.hypot(*vy))
             .fold(0.0, f64::max)
     }
+
+    /// What the strips and the lists' skin are sized by.
+    pub fn figures(&self) -> DiskFigures {
+        DiskFigures {
+            n_disks: self.len(),
+            disk_area: self.disk_area(),
+            max_radius: self.max_radius(),
+            min_radius: self.min_radius(),
+            max_speed: self.max_speed(),
+        }
+    }
+}
+
+/// What sizes the strips, the lists' skin and a dt rule: of all the scene's disks, even
+/// where a rank holds only some of them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DiskFigures {
+    pub n_disks: usize,
+    /// Σ π r².
+    pub disk_area: f64,
+    pub max_radius: f64,
+    pub min_radius: f64,
+    pub max_speed: f64,
 }
 
 #[cfg(test)]

@@ -23,8 +23,8 @@ use xxhash_rust::xxh3::xxh3_64;
 use super::exact_sum::ExactSum;
 use super::particles::{Particles, PerDisk};
 use super::scene::{
-    Boundary, Domain, Extent, GasSpec, MAX_TRIES_PER_DISK, MassRule, Placement, PlacementError, RANDOM_MAX_PACKING,
-    RadiusDistribution, check_periodic_box, minimum_image,
+    Boundary, Domain, Extent, GasSpec, MAX_TRIES_PER_DISK, MassRule, Placement, PlacementError,
+    RANDOM_MAX_PACKING, RadiusDistribution, check_periodic_box, minimum_image,
 };
 
 /// Bands are at least this many contact diameters tall: the band's edges, where its
@@ -308,7 +308,11 @@ impl GasPlan {
     }
 
     fn n_colours(&self) -> usize {
-        (0..self.n_bands).map(|band| self.colour(band)).max().unwrap_or(0) + 1
+        (0..self.n_bands)
+            .map(|band| self.colour(band))
+            .max()
+            .unwrap_or(0)
+            + 1
     }
 
     /// The bands below and above `band`, across a periodic box's edge too (none for a
@@ -356,10 +360,11 @@ impl GasPlan {
                 }
                 // The band below shows its top edge, the band above its bottom edge.
                 let [below, above] = self.neighbours(band);
-                let below = below.map(|below| self.edge_of(below, 1, band, &placed, &bands, &outside));
-                let above = above.map(|above| self.edge_of(above, 0, band, &placed, &bands, &outside));
-                match self.place_band(band, below.unwrap_or_default(), above.unwrap_or_default())
-                {
+                let below =
+                    below.map(|below| self.edge_of(below, 1, band, &placed, &bands, &outside));
+                let above =
+                    above.map(|above| self.edge_of(above, 0, band, &placed, &bands, &outside));
+                match self.place_band(band, below.unwrap_or_default(), above.unwrap_or_default()) {
                     Ok(disks) => placed[band - bands.start] = disks,
                     Err(error) => failure = Some(error),
                 }
@@ -454,9 +459,14 @@ impl GasPlan {
         let reach = 2.0 * self.max_radius;
         let periodic = domain.boundary == Boundary::Periodic;
         let mut grid = match self.n_bands {
-            1 => BandGrid::new(domain.width, 0.0, domain.height, reach, end - first, [
-                periodic, periodic,
-            ]),
+            1 => BandGrid::new(
+                domain.width,
+                0.0,
+                domain.height,
+                reach,
+                end - first,
+                [periodic, periodic],
+            ),
             _ => BandGrid::new(
                 domain.width,
                 low - reach,
@@ -599,7 +609,6 @@ impl GasPlan {
     }
 }
 
-
 /// One cell of a band's grid, or one further disk of a cell. The first disk placed in a
 /// cell is stored inline, so a try reads its 3×3 block of cells from three runs of
 /// three cells; further disks of the cell (cells hold about one disk) are chained
@@ -624,7 +633,6 @@ const EMPTY_CELL: PlacementCell = PlacementCell {
     radius: f64::NAN,
     more: NO_DISK,
 };
-
 
 /// The uniform grid of one band's placement: the band and a contact diameter of each
 /// neighbour band (or the whole box, for a single band), with the disks placed so far.
@@ -909,7 +917,6 @@ fn total_order_key_inverse(key: i64) -> u64 {
     (key ^ (((key >> 63) as u64) >> 1) as i64) as u64
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -929,7 +936,10 @@ mod tests {
                 }
             };
             if !inside {
-                faults.push(format!("disk {i} at ({}, {}) leaves the box", p.x[i], p.y[i]));
+                faults.push(format!(
+                    "disk {i} at ({}, {}) leaves the box",
+                    p.x[i], p.y[i]
+                ));
             }
             for j in i + 1..p.len() {
                 let (dx, dy) = d.separation(p.x[i], p.y[i], p.x[j], p.y[j]);
@@ -986,13 +996,19 @@ mod tests {
             let scene = gas.build().unwrap();
             let p = &scene.particles;
             assert_eq!(p.len(), gas.n_particles, "{name}");
-            assert!(p.id.iter().enumerate().all(|(k, &id)| id as usize == k), "{name}");
+            assert!(
+                p.id.iter().enumerate().all(|(k, &id)| id as usize == k),
+                "{name}"
+            );
             let faults = faults(&scene);
             assert!(faults.is_empty(), "{name}: {}", faults.join("; "));
             let m = |i: usize| p.mass[i];
             let px: f64 = (0..p.len()).map(|i| m(i) * p.vx[i]).sum();
             let py: f64 = (0..p.len()).map(|i| m(i) * p.vy[i]).sum();
-            assert!(px.hypot(py) < 1e-10 * p.len() as f64, "{name}: drift {px} {py}");
+            assert!(
+                px.hypot(py) < 1e-10 * p.len() as f64,
+                "{name}: drift {px} {py}"
+            );
             let rms = p.rms_speed();
             assert!((rms - gas.speed_rms).abs() < 1e-12, "{name}: rms {rms}");
         }
@@ -1034,5 +1050,4 @@ mod tests {
             (-2.5_f64).to_bits()
         );
     }
-
 }

@@ -13,7 +13,7 @@ use super::grid::{Contact, StripGrid, find_contacts_all_pairs};
 use super::neighbours::{
     DISPLACEMENT_BLOCK, Displacements, PairList, Skin, mark_escapees, with_reorder_scratch,
 };
-use super::particles::{DiskSlices, Particles, PerDiskSlice};
+use super::particles::{DiskFigures, DiskSlices, Particles, PerDiskSlice};
 use super::pieces::InTurn;
 use super::resolve::resolve_contacts;
 use super::scene::{Boundary, Domain, Physics, Scene, wrap_periodic};
@@ -490,14 +490,14 @@ fn reflect_at_walls(
 /// The largest dt for which the fastest disk moves at most `fraction` of the smallest
 /// radius per step. With a field, the fastest speed includes what a fall across the
 /// whole box can add. A scene at rest gets the dt of unit speed.
-pub fn auto_dt(particles: &Particles, domain: &Domain, physics: &Physics, fraction: f64) -> f64 {
-    let mut max_speed = particles.max_speed();
+pub fn auto_dt(figures: &DiskFigures, domain: &Domain, physics: &Physics, fraction: f64) -> f64 {
+    let mut max_speed = figures.max_speed;
     if let Some([gx, gy]) = physics.gravity {
         let g = gx.hypot(gy);
         max_speed += (2.0 * g * domain.width.max(domain.height)).sqrt();
     }
     let max_speed = if max_speed > 0.0 { max_speed } else { 1.0 };
-    fraction * particles.min_radius() / max_speed
+    fraction * figures.min_radius / max_speed
 }
 
 #[cfg(test)]
