@@ -444,7 +444,9 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let mut spec = scene_file::load(&args.scene, &args.overrides)?;
     let capabilities = args.backend.capabilities();
     let copies = match (capabilities.scene_in_every_process, backend) {
-        (true, BackendSpec::Mpi { ranks }) => ranks.map_or_else(usable_cpus, NonZeroUsize::get),
+        (true, BackendSpec::Mpi { ranks }) => {
+            spec.whole_scene_copies(ranks.map_or_else(usable_cpus, NonZeroUsize::get))
+        }
         _ => 1,
     };
     check_fits(&args.scene, &spec, copies, &machine)?;

@@ -85,6 +85,7 @@ fn mpi_ranks_count_what_they_send_as_ranks_run_as_threads_do() {
             "collectives_per_step",
             "load_imbalance",
             "recuts",
+            "setup_disks_max",
         ] {
             assert_eq!(mpi[field], threads[field], "{field} at {ranks} ranks");
         }

@@ -291,16 +291,24 @@ fn runs_too_large_for_the_machine_are_refused_before_allocating() {
         "{stderr}"
     );
     assert!(!out.exists(), "the study ran before refusing");
-    // Every MPI rank holds all the disks: ranks multiply the estimate.
+    // MPI ranks place a seeded gas in parts, so the estimate is the run's; a run whose
+    // dt is chosen by pilots on the whole scene is built whole by every rank, and its
+    // ranks multiply the estimate.
     let machine = Machine {
         usable_cpus: 64,
         memory_bytes: 8_000_000_000,
     };
-    let ranks = format!(
-        "name = \"m\"\n[sweep]\nn = [20000000]\n[backends]\nmpi = [2, 4]\n{}",
-        inline_scene("gas")
-    );
-    let err = collide::study::manifest::parse(Path::new("m.toml"), &ranks, &machine)
+    let ranks = |dt: &str| {
+        format!(
+            "name = \"m\"\n[sweep]\nn = [20000000]\n[backends]\nmpi = [2, 4]\n{}",
+            inline_scene("gas").replace("dt = 0.1", dt)
+        )
+    };
+    let in_parts =
+        collide::study::manifest::parse(Path::new("m.toml"), &ranks("dt = 0.1"), &machine);
+    assert!(in_parts.is_ok(), "{in_parts:?}");
+    let whole = ranks("dt = \"auto\"");
+    let err = collide::study::manifest::parse(Path::new("m.toml"), &whole, &machine)
         .unwrap_err()
         .to_string();
     assert!(

@@ -64,6 +64,7 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         collectives_per_step: (backend == "mpi").then_some(3.05),
         load_imbalance: (backend == "mpi").then_some(1.02),
         recuts: (backend == "mpi").then_some(0),
+        setup_disks_max: (backend == "mpi").then_some(500),
         rank_cpus: None,
         kinetic_energy_initial: 500.0,
         kinetic_energy_final: 500.0,

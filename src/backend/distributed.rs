@@ -21,6 +21,7 @@ use std::ops::{ControlFlow, Range};
 use std::time::Instant;
 
 use crate::backend::comm::{Communicator, Counting, RankTraffic, Traffic};
+use crate::backend::setup::{self, RankStart, cut_slabs, owners};
 use crate::backend::shared::{Neighbourhood, Seen, SharedChains, pack_shared_disk};
 use crate::backend::{
     Accuracy, BackendError, Balance, CpuScope, Measured, RunOutcome, StageSeconds, Workers,
@@ -33,9 +34,7 @@ use crate::sim::grid::{
     Contact, Mover, StripGrid, StripLayout, receive_band, refresh_band, sort_movers,
 };
 use crate::sim::neighbours::{PairList, Skin, with_reorder_scratch};
-use crate::sim::observe::{
-    Block, Observables, SeriesRecorder, StateSums, block_end, kinetic_of, observe,
-};
+use crate::sim::observe::{Block, Observables, SeriesRecorder, StateSums, block_end, kinetic_of};
 use crate::sim::particles::{PACKED_LEN, SPARE_SHARE};
 use crate::sim::pieces::InTurn;
 use crate::sim::resolve::resolve_contacts;
@@ -54,16 +53,25 @@ pub fn run<C: Communicator>(
 ) -> Result<Option<RunOutcome>, BackendError> {
     let setup_start = Instant::now();
     let comm = &Counting::new(comm);
-    // Every rank builds the same initial state from the seed, keeps its slab and lets
-    // the rest go.
-    let mut prepared = spec.prepare()?;
-    let scene = &prepared.scene;
-    let initial = observe(&scene.particles);
-    let skin = Skin::for_scene(&scene.domain, &scene.particles, prepared.params.dt);
-    let layout = StripLayout::with_skin(&scene.domain, &scene.particles, skin.width());
-    let slabs = slabs(&layout, &scene.particles, comm.size())?;
-    let mut rank = RankState::new(comm, scene, layout, &slabs, skin);
-    prepared.scene.particles = Particles::default();
+    let RankStart {
+        prepared,
+        own,
+        whole,
+        skin,
+        layout,
+        slabs,
+        most_held,
+    } = setup::start(comm, spec)?;
+    let initial = whole.state.observables();
+    let mut rank = RankState::new(
+        &prepared.scene,
+        own,
+        whole.state.disks as usize,
+        layout,
+        &slabs,
+        skin,
+        comm.rank(),
+    );
     rank.build_lists(comm);
     // The ranks start their clocks together: a rank whose set-up ended first would
     // otherwise count its wait for the slowest one (as much as a fifth of the stepping
@@ -94,7 +102,7 @@ pub fn run<C: Communicator>(
         0..rank.n_own,
         prepared.scene.physics.gravity,
     );
-    let mut figures = rank_figures(&rank, &seconds, &sent).to_vec();
+    let mut figures = rank_figures(&rank, &seconds, &sent, most_held).to_vec();
     figures.extend(own.to_words());
     let all_figures = comm.all_gather(&figures);
     let states = (final_state == FinalState::Gathered).then(|| rank.gather_on_first(comm));
@@ -110,6 +118,10 @@ pub fn run<C: Communicator>(
     measured.balance = (rank.steps > 0).then(|| Balance {
         imbalance: rank.busiest_share_sum / rank.steps as f64,
         recuts: rank.recuts,
+        setup_disks_max: (all_figures.iter())
+            .map(|figures| figures[RANK_FIGURES - 1] as u64)
+            .max()
+            .unwrap_or(0),
     });
     let workers = Workers {
         backend: BackendKind::Mpi,
@@ -217,11 +229,16 @@ pub enum FinalState {
 }
 
 /// Values of [`rank_figures`].
-const RANK_FIGURES: usize = 15;
+const RANK_FIGURES: usize = 16;
 
 /// What a rank tells the others after the loop, in one gathered array: its counters,
 /// its stage and loop seconds, and what it sent.
-fn rank_figures(rank: &RankState, seconds: &LoopSeconds, sent: &Traffic) -> [f64; RANK_FIGURES] {
+fn rank_figures(
+    rank: &RankState,
+    seconds: &LoopSeconds,
+    sent: &Traffic,
+    most_held: usize,
+) -> [f64; RANK_FIGURES] {
     let c = &rank.counters;
     let s = &rank.stages;
     [
@@ -241,6 +258,7 @@ fn rank_figures(rank: &RankState, seconds: &LoopSeconds, sent: &Traffic) -> [f64
         sent.messages as f64,
         sent.bytes as f64,
         sent.collectives as f64,
+        most_held as f64,
     ]
 }
 
@@ -295,52 +313,6 @@ fn merge_figures(
     }
 }
 
-/// Cuts the strips into `n_ranks` slabs of whole strips, each at least one strip, so
-/// that the disks of `particles` are shared out as evenly as whole strips allow.
-fn slabs(
-    layout: &StripLayout,
-    particles: &Particles,
-    n_ranks: usize,
-) -> Result<Vec<Range<usize>>, BackendError> {
-    let n_strips = layout.n_strips;
-    if n_strips < n_ranks {
-        return Err(BackendError::Mpi(format!(
-            "the box is {n_strips} strips (one contact diameter each) tall, fewer than the \
-             {n_ranks} ranks asked for; use at most {n_strips} ranks or a taller box"
-        )));
-    }
-    let mut per_strip = vec![0usize; n_strips];
-    for &y in &particles.y {
-        per_strip[layout.strip_of(y)] += 1;
-    }
-    Ok(cut_slabs(&per_strip, n_ranks))
-}
-
-/// Cuts strips holding `per_strip` disks each into `n_ranks` slabs of whole strips (at
-/// least one each, so `n_ranks` ≤ the strips), each slab ending where the disks before
-/// it first reach their share of the total.
-fn cut_slabs(per_strip: &[usize], n_ranks: usize) -> Vec<Range<usize>> {
-    let n_strips = per_strip.len();
-    let total: usize = per_strip.iter().sum();
-    let mut slabs = Vec::with_capacity(n_ranks);
-    let (mut start, mut count) = (0, 0);
-    for rank in 0..n_ranks - 1 {
-        let share = total * (rank + 1) / n_ranks;
-        // Leave at least one strip for each rank still to come.
-        let last_end = n_strips - (n_ranks - rank - 1);
-        let mut end = start + 1;
-        count += per_strip[start];
-        while end < last_end && count < share {
-            count += per_strip[end];
-            end += 1;
-        }
-        slabs.push(start..end);
-        start = end;
-    }
-    slabs.push(start..n_strips);
-    slabs
-}
-
 /// The slabs are cut again, at a rebuild, when the rank holding most disks holds more
 /// than this many times the mean: disks that settle (a pile under gravity) or drift
 /// leave the first cut's ranks uneven, and a step lasts as long as its busiest rank's.
@@ -349,15 +321,6 @@ const REBALANCE_ABOVE: f64 = 1.1;
 /// ... and more than this above the busiest share the last cut made: whole strips may
 /// not allow an even cut, and cutting again cannot do better than the disks allow.
 const REBALANCE_GAIN: f64 = 0.05;
-
-/// The rank that owns each of `n_strips` strips cut into `slabs`.
-fn owners(slabs: &[Range<usize>], n_strips: usize) -> Vec<usize> {
-    let mut owner = vec![0; n_strips];
-    for (rank, strips) in slabs.iter().enumerate() {
-        owner[strips.clone()].fill(rank);
-    }
-    owner
-}
 
 /// One rank's part of a cut of the strips into slabs: its slab, every strip's owner,
 /// the ranks near it, the rank its ghosts come from, and its slab's grid, filled with
@@ -527,24 +490,17 @@ impl RankState {
         comm.exchange(&to_first)
     }
 
-    fn new<C: Communicator>(
-        comm: &C,
+    /// Rank `me`'s state, from its disks (`particles`, all in its slab) of a scene of
+    /// `n_disks`.
+    fn new(
         scene: &crate::sim::Scene,
+        particles: Particles,
+        n_disks: usize,
         layout: StripLayout,
         slabs: &[Range<usize>],
         skin: Skin,
+        me: usize,
     ) -> RankState {
-        let me = comm.rank();
-        let all = &scene.particles;
-        let mut packed = Vec::new();
-        for idx in 0..all.len() {
-            if slabs[me].contains(&layout.strip_of(all.y[idx])) {
-                all.pack(idx, &mut packed);
-            }
-        }
-        let n_own = packed.len() / PACKED_LEN;
-        let mut particles = Particles::with_capacity(n_own + n_own / SPARE_SHARE);
-        particles.unpack_append(&packed);
         let SlabPart {
             slab,
             owner,
@@ -565,7 +521,7 @@ impl RankState {
             grid,
             skin,
             list: PairList::default(),
-            reorder: ReorderSchedule::for_scene(all.len()),
+            reorder: ReorderSchedule::for_scene(n_disks),
             movers: Vec::new(),
             contacts: Vec::new(),
             shared: Vec::new(),
@@ -579,7 +535,7 @@ impl RankState {
             counters: StepCounters::default(),
             shared_counters: StepCounters::default(),
             stages: StageSeconds::default(),
-            n_disks: all.len(),
+            n_disks,
             busiest_share_sum: 0.0,
             steps: 0,
             recuts: 0,
@@ -1142,7 +1098,7 @@ mod tests {
     use super::*;
     use crate::backend::comm::ThreadComm;
     use crate::backend::serial;
-    use crate::run::spec::{InjectedSlowdown, MethodSpec, SceneSource};
+    use crate::run::spec::{InjectedSlowdown, MethodSpec, PreparedRun, SceneSource};
     use crate::sim::scene::{GasSpec, MassRule, RadiusDistribution};
     use crate::sim::{Broadphase, Physics};
 
@@ -1376,18 +1332,7 @@ mod tests {
             method: MethodSpec::stepped(0.02, 2500, Broadphase::Grid),
             slowdown: InjectedSlowdown::NONE,
         };
-        let prepared = spec.prepare().unwrap();
-        let skin = Skin::for_scene(
-            &prepared.scene.domain,
-            &prepared.scene.particles,
-            prepared.params.dt,
-        );
-        let layout = StripLayout::with_skin(
-            &prepared.scene.domain,
-            &prepared.scene.particles,
-            skin.width(),
-        );
-        let first_cut = slabs(&layout, &prepared.scene.particles, ranks).unwrap();
+        let (layout, first_cut) = first_slabs(&spec.prepare().unwrap(), ranks);
         let reference = serial::run(&spec).unwrap();
         let most_in_first_cut = (first_cut.iter())
             .map(|slab| {
@@ -1532,19 +1477,66 @@ mod tests {
         assert_eq!(summary.state_hash, reference.state_hash);
     }
 
+    /// No rank holds more than its share of the disks, set-up included: each rank
+    /// places only its own bands (64 of them here) and then hands the disks to the
+    /// ranks whose slabs hold them.
+    #[test]
+    fn no_rank_holds_more_than_its_share_of_the_disks_at_set_up() {
+        let n = 270_000;
+        let spec = RunSpec {
+            scene: SceneSource::Gas(GasSpec::unit(n, 0.05)),
+            method: MethodSpec::stepped(0.05, 1, Broadphase::Grid),
+            slowdown: InjectedSlowdown::NONE,
+        };
+        for ranks in [2, 4, 8, 16] {
+            let held = run_on_threads(&spec, ranks)
+                .summary
+                .setup_disks_max
+                .unwrap();
+            let share = n as f64 / ranks as f64;
+            assert!(
+                held as f64 <= 1.25 * share,
+                "{ranks} ranks: a rank held {held} disks, {:.3}× its share",
+                held as f64 / share
+            );
+        }
+    }
+
+    /// The strips of `prepared`'s run and the slabs set-up cuts them into for `ranks`.
+    fn first_slabs(prepared: &PreparedRun, ranks: usize) -> (StripLayout, Vec<Range<usize>>) {
+        let (scene, dt) = (&prepared.scene, prepared.params.dt);
+        let skin = Skin::for_scene(&scene.domain, &scene.particles, dt);
+        let layout = StripLayout::with_skin(&scene.domain, &scene.particles, skin.width());
+        let mut per_strip = vec![0; layout.n_strips];
+        for &y in &scene.particles.y {
+            per_strip[layout.strip_of(y)] += 1;
+        }
+        let slabs = cut_slabs(&per_strip, ranks);
+        (layout, slabs)
+    }
+
     #[test]
     fn more_ranks_than_strips_is_refused_with_the_limit() {
         let spec = spec(Boundary::Walls, 1.0, 0.05);
-        let prepared = spec.prepare().unwrap();
-        let particles = &prepared.scene.particles;
-        let layout = StripLayout::new(&prepared.scene.domain, particles);
-        let error = slabs(&layout, particles, layout.n_strips + 1).unwrap_err();
-        assert!(error.to_string().contains("use at most"), "{error}");
-        let cut = slabs(&layout, particles, 3).unwrap();
+        let (layout, cut) = first_slabs(&spec.prepare().unwrap(), 3);
         assert_eq!((cut[0].start, cut[2].end), (0, layout.n_strips));
         assert!(
             cut.windows(2)
                 .all(|w| w[0].end == w[1].start && !w[1].is_empty())
+        );
+        let spec = &spec;
+        let errors: Vec<String> = std::thread::scope(|scope| {
+            let handles: Vec<_> = ThreadComm::group(layout.n_strips + 1)
+                .into_iter()
+                .map(|comm| scope.spawn(move || run(&comm, spec, FinalState::Summed).err()))
+                .collect();
+            (handles.into_iter())
+                .map(|handle| handle.join().unwrap().expect("refused").to_string())
+                .collect()
+        });
+        assert!(
+            errors.iter().all(|error| error.contains("use at most")),
+            "{errors:?}"
         );
     }
 }

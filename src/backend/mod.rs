@@ -10,6 +10,7 @@ pub mod launcher;
 #[cfg(feature = "mpi")]
 pub mod mpi;
 pub mod serial;
+mod setup;
 mod shared;
 pub mod team;
 pub mod threads;
@@ -178,6 +179,8 @@ pub struct Balance {
     pub imbalance: f64,
     /// Times the ranks cut their slabs again during the stepping loop.
     pub recuts: u64,
+    /// The most disks a rank held during set-up (placed, or in its slab).
+    pub setup_disks_max: u64,
 }
 
 /// What a backend observed beyond the counters; `None` where it does not observe it.
@@ -262,6 +265,7 @@ pub fn summarize(
         collectives_per_step: traffic.and_then(|t| per_step(t.collectives as f64)),
         load_imbalance: measured.balance.map(|balance| balance.imbalance),
         recuts: measured.balance.map(|balance| balance.recuts),
+        setup_disks_max: measured.balance.map(|balance| balance.setup_disks_max),
         kinetic_energy_initial: measured.initial.kinetic_energy,
         kinetic_energy_final: outcome.last.kinetic_energy,
         momentum_initial: measured.initial.momentum,

@@ -110,7 +110,8 @@ pub struct Capabilities {
     pub event_method: bool,
     /// Holds every disk in one process, so it can draw every step (`draw`).
     pub draws: bool,
-    /// Every process places and holds the whole scene: its memory counts once per process.
+    /// Its processes may each place and hold the whole scene (a scene that is not placed
+    /// in parts: [`crate::run::spec::RunSpec::whole_scene_copies`]).
     pub scene_in_every_process: bool,
     /// Its processes are started by an MPI launcher: it needs the `mpi` cargo feature.
     pub mpi: bool,

@@ -261,7 +261,8 @@ pub struct Footprint {
     pub n_particles: u64,
     /// Steps of the run (the event method's are the step method's with the same dt).
     pub steps: u64,
-    /// Copies of the whole state: MPI ranks each build every disk; 1 otherwise.
+    /// Copies of the whole state: MPI ranks that each build every disk
+    /// ([`RunSpec::whole_scene_copies`]); 1 otherwise.
     pub copies: u64,
     /// Bytes per disk per copy for the method the run may use.
     pub bytes_per_disk: u64,
@@ -272,6 +273,16 @@ pub struct Footprint {
 }
 
 impl RunSpec {
+    /// How many processes of a run on `ranks` MPI ranks each build the whole scene: all
+    /// of them, unless the ranks place a seeded gas in parts (then the disks are shared
+    /// out: one copy in all).
+    pub fn whole_scene_copies(&self, ranks: usize) -> usize {
+        match self.may_prepare_in_parts() {
+            true => 1,
+            false => ranks,
+        }
+    }
+
     /// The run's [`Footprint`] with `copies` copies of its state (ranks of an MPI run).
     pub fn footprint(&self, copies: usize) -> Footprint {
         let (n_particles, placement_s) = match &self.scene {

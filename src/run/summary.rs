@@ -93,6 +93,10 @@ pub struct RunSummary {
     /// serial and rayon.
     #[serde(default)]
     pub recuts: Option<u64>,
+    /// MPI: the most disks a rank held during set-up (its placed bands, or its slab's
+    /// disks); null for serial and rayon.
+    #[serde(default)]
+    pub setup_disks_max: Option<u64>,
     /// MPI: where each rank ran, in rank order, as `HOST:CPUS/THREADS` joined by `; `
     /// (its allowed CPUs as the kernel lists them, and its threads); null for serial and
     /// rayon, and inside a rank (the launching process fills it in).
@@ -344,6 +348,14 @@ impl RunSummary {
                 f,
                 "balance    the busiest rank held {imbalance:.3}× the mean disks (over the \
                  steps); slabs cut again {recuts} times"
+            )?;
+        }
+        if let Some(held) = self.setup_disks_max {
+            let mean = self.n as f64 / self.ranks.max(1) as f64;
+            writeln!(
+                f,
+                "set-up     no rank held more than {held} disks ({:.3}× the mean)",
+                held as f64 / mean
             )?;
         }
         Ok(())

@@ -317,7 +317,7 @@ impl GasPlan {
 
     /// The bands below and above `band`, across a periodic box's edge too (none for a
     /// single band).
-    fn neighbours(&self, band: usize) -> [Option<usize>; 2] {
+    pub fn neighbours(&self, band: usize) -> [Option<usize>; 2] {
         let n = self.n_bands;
         let periodic = self.domain.boundary == Boundary::Periodic;
         if n == 1 {

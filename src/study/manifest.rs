@@ -550,7 +550,7 @@ fn checked(
     let spec = load_scene(input, overrides).map_err(in_scene)?;
     let capabilities = backend.capabilities();
     let copies = match capabilities.scene_in_every_process {
-        true => backend.placement(workers).ranks,
+        true => spec.whole_scene_copies(backend.placement(workers).ranks),
         false => 1,
     };
     let footprint = spec.footprint(copies);
