@@ -43,6 +43,7 @@ impl RunSpec {
             method: choice.method,
             event,
             observe: self.method.observe,
+            discard: self.method.discard,
         })
     }
 }
