@@ -26,30 +26,24 @@ pub struct Observable {
     pub replica_columns: fn(&mut Record) -> (&mut f64, &mut f64),
 }
 
+/// An [`Observable`] from its record columns: mean, SE, replica mean, replica SE.
+macro_rules! observable {
+    ($name:literal: $mean:ident, $se:ident, $replica_mean:ident, $replica_se:ident) => {
+        Observable {
+            name: $name,
+            mean: |r| r.$mean,
+            se: |r| r.$se,
+            replica_columns: |r| (&mut r.$replica_mean, &mut r.$replica_se),
+        }
+    };
+}
+
 /// The observables checked, in the report's order.
 pub const OBSERVABLES: [Observable; 2] = [
-    Observable {
-        name: "Z",
-        mean: |r| r.compressibility_z,
-        se: |r| r.compressibility_z_se,
-        replica_columns: |r| {
-            (
-                &mut r.compressibility_z_replica_mean,
-                &mut r.compressibility_z_replica_se,
-            )
-        },
-    },
-    Observable {
-        name: "collision rate",
-        mean: |r| r.collision_rate,
-        se: |r| r.collision_rate_se,
-        replica_columns: |r| {
-            (
-                &mut r.collision_rate_replica_mean,
-                &mut r.collision_rate_replica_se,
-            )
-        },
-    },
+    observable!("Z": compressibility_z, compressibility_z_se,
+        compressibility_z_replica_mean, compressibility_z_replica_se),
+    observable!("collision rate": collision_rate, collision_rate_se,
+        collision_rate_replica_mean, collision_rate_replica_se),
 ];
 
 /// One observable over the seeds of one setup.
@@ -67,10 +61,11 @@ impl ReplicaCheck {
         self.replica.se / self.within_se
     }
 
-    /// Whether one standard error is more than [`DISAGREEMENT`] times the other.
+    /// Whether one standard error is more than [`DISAGREEMENT`] times the other (two
+    /// zeros agree).
     pub fn disagrees(&self) -> bool {
         let ratio = self.ratio();
-        ratio > DISAGREEMENT || ratio < 1.0 / DISAGREEMENT
+        !ratio.is_nan() && !(1.0 / DISAGREEMENT..=DISAGREEMENT).contains(&ratio)
     }
 }
 
