@@ -157,6 +157,21 @@ fn a_discard_that_leaves_nothing_to_average_is_refused_with_the_field_named() {
     let scene = dense_lattice_with(dir.path(), 0.6, 1.0, 500, "discard = true\n");
     let stderr = refused_in(dir.path(), &["simulate", &scene]);
     assert!(stderr.contains("dense.toml:15"), "{stderr}");
+    // A manifest's swept discard, before anything runs.
+    let scene = dense_lattice(dir.path(), 0.6, 1.0, 500);
+    let manifest = scene_file(
+        dir.path(),
+        "sweep.toml",
+        &format!(
+            "name = \"sweep\"\n[[scenes]]\nfile = \"{scene}\"\n[sweep]\ndiscard = [\"10%\", \"120%\"]\n\
+             [backends]\nserial = true\n"
+        ),
+    );
+    let stderr = refused_in(dir.path(), &["run", manifest.to_str().unwrap()]);
+    assert!(
+        stderr.contains("discard = 120%") && stderr.contains("`method.discard` is 120%"),
+        "{stderr}"
+    );
 }
 
 #[test]
