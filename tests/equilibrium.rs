@@ -5,7 +5,7 @@
 //! and one that leaves nothing to average is refused with the field named; the seeds of
 //! a study are compared as replicas in its records and report.
 
-use crate::util::{collide, json_summary, refused_in, run_study, scene_file};
+use crate::util::{collide, json_summary, refused_in, report_of, run_study, scene_file};
 
 /// 1024 equal disks on a square lattice at `packing` in a periodic box (the event
 /// method, T = 0.5), over `steps` intervals of `dt`.
@@ -222,19 +222,7 @@ fn a_study_sweeps_the_discard_and_compares_its_seeds_as_replicas() {
         row.unwrap().compressibility_z_replica_mean
     };
     assert_ne!(mean_of(true), mean_of(false));
-    let report = dir.path().join("report");
-    let made = collide(&[
-        "report",
-        folder.to_str().unwrap(),
-        "--out",
-        report.to_str().unwrap(),
-    ]);
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
-    );
-    let text = std::fs::read_to_string(report.join("report.md")).unwrap();
+    let text = report_of(&folder, &dir.path().join("report"));
     assert!(
         text.contains("| gas n=256 discard=25% | 1, 2, 3 | Z |"),
         "{text}"
