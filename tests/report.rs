@@ -83,6 +83,7 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         pressure: Some(0.0041),
         compressibility_z: Some(1.05),
         equilibrated: None,
+        equilibration_cut: None,
         equilibration_cut_time: None,
         compressibility_z_from_zero: None,
         compressibility_z_se: None,
@@ -972,4 +973,130 @@ fn the_results_export_as_csv_and_json_with_every_setting_and_units_in_the_names(
         lines[4],
         "| serial | 1 | 10.2 ms | 10.0–11.0 ms | 10.0–11.0 ms | 3 | 0 |"
     );
+}
+
+/// Seeds 1 to 4 of one setup, each with Z and the collision rate after its cut and
+/// blocked error bars `se_scale` times those of the worked example in docs/accuracy.md;
+/// beside them a rayon run of seed 1 (the same numbers: counted once), a seed 5 that
+/// did not equilibrate (left out), a failed run of seed 6, and a second setup (another
+/// dt) run with one seed only (no replicas).
+fn replica_records(se_scale: f64) -> Vec<Record> {
+    let template = serial_record();
+    let z = [6.46555, 6.44791, 6.45851, 6.45827];
+    let z_se = [0.00658, 0.00614, 0.00532, 0.00580];
+    let rate = [4.3555, 4.3480, 4.3541, 4.3505];
+    let rate_se = [0.0045, 0.0043, 0.0041, 0.0046];
+    let seeded = |seed: u64, dt: &str| {
+        let mut record = template.clone();
+        record.seed = Some(seed);
+        record.config_key = template
+            .config_key
+            .replace("seed=-", &format!("seed={seed}"))
+            .replace("dt=-", &format!("dt={dt}"));
+        record
+    };
+    let mut out = Vec::new();
+    for (index, seed) in (1..=4).enumerate() {
+        let mut record = seeded(seed, "-");
+        record.compressibility_z = z[index];
+        record.compressibility_z_se = se_scale * z_se[index];
+        record.collision_rate = rate[index];
+        record.collision_rate_se = se_scale * rate_se[index];
+        out.push(record);
+    }
+    let mut copy = out[0].clone();
+    copy.backend = "rayon".into();
+    copy.config_key = copy.config_key.replace("backend=serial", "backend=rayon");
+    out.push(copy);
+    let mut unsettled = seeded(5, "-");
+    (unsettled.compressibility_z, unsettled.compressibility_z_se) = (7.0, f64::NAN);
+    out.push(unsettled);
+    let mut failed = out[0].clone();
+    (failed.seed, failed.status) = (Some(6), "failed".into());
+    out.push(failed);
+    let mut alone = out[0].clone();
+    alone.config_key = seeded(1, "0.05").config_key;
+    out.push(alone);
+    out
+}
+
+#[test]
+fn the_spread_over_seeds_is_reported_and_recorded_beside_the_runs_own_error_bars() {
+    use collide::study::{records, replicas};
+    let records = replica_records(1.0);
+    let groups = replicas::checks(&records);
+    assert_eq!(groups.len(), 1, "{groups:?}");
+    let group = &groups[0].1;
+    assert_eq!(group.seeds, [1, 2, 3, 4]);
+    // By hand: the mean of the four, s/√4, and √(Σ SE²)/4.
+    let z = &records[..4];
+    let mean = z.iter().map(|r| r.compressibility_z).sum::<f64>() / 4.0;
+    let s2 = z
+        .iter()
+        .map(|r| (r.compressibility_z - mean).powi(2))
+        .sum::<f64>()
+        / 3.0;
+    let within = z
+        .iter()
+        .map(|r| r.compressibility_z_se.powi(2))
+        .sum::<f64>()
+        .sqrt()
+        / 4.0;
+    let check = group.checks[0];
+    assert!((check.replica.mean - mean).abs() < 1e-12);
+    assert!((check.replica.se - s2.sqrt() / 2.0).abs() < 1e-12);
+    assert!((check.replica.half_width_95 - 3.182 * s2.sqrt() / 2.0).abs() < 1e-12);
+    assert!((check.within_se - within).abs() < 1e-12);
+    assert!(!group.checks.iter().any(|c| c.disagrees()), "{group:?}");
+    let text = markdown(&records);
+    assert!(
+        text.contains("## Replicas: the spread over seeds"),
+        "{text}"
+    );
+    assert!(
+        text.contains(
+            "| seed-1000 n=1000 | 1, 2, 3, 4 | Z | 6.45756 ± 0.00363 | ± 0.0116 | 0.00299 | 1.2 |"
+        ),
+        "{text}"
+    );
+    assert!(!text.contains("error bars disagree"), "{text}");
+    // The records carry it in every successful row of the setup, through Parquet.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("r.parquet");
+    records::write(&path, &records).unwrap();
+    let read = records::read(&path).unwrap();
+    for (index, row) in read.iter().enumerate() {
+        let replicated = index < 6;
+        assert_eq!(row.replicas, replicated.then_some(4), "row {index}");
+        assert_eq!(
+            row.compressibility_z_replica_se.is_finite(),
+            replicated,
+            "row {index}"
+        );
+    }
+    assert_eq!(read[2].compressibility_z_replica_mean, check.replica.mean);
+    assert_eq!(read[2].compressibility_z_replica_se, check.replica.se);
+    assert_eq!(
+        read[3].collision_rate_replica_se,
+        group.checks[1].replica.se
+    );
+}
+
+#[test]
+fn error_bars_that_disagree_with_the_spread_over_seeds_are_flagged_either_way() {
+    // Error bars ten times too small: the spread is 12× the runs' own SE.
+    let text = markdown(&replica_records(0.1));
+    assert!(
+        text.contains(
+            "> **Warning: error bars disagree with the spread over seeds.** Z of seed-1000 \
+             n=1000 over 4 seeds: replica SE 0.00363, 12× the within-run SE 0.000299; the \
+             runs' blocked error bars are too small"
+        ),
+        "{text}"
+    );
+    assert!(text.contains("| **12** |"), "{text}");
+    // Ten times too large: the seeds agree better than their error bars say.
+    let text = markdown(&replica_records(10.0));
+    assert!(text.contains("Z of seed-1000 n=1000 over 4 seeds: replica SE 0.00363, 0.12×"));
+    assert!(text.contains("the seeds agree better than their error bars say"));
 }

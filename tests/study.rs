@@ -7,8 +7,8 @@ use std::time::{Duration, Instant};
 use collide::study::records::{self, Record, STATUS_TIMED_OUT};
 
 use crate::util::{
-    collide, interrupt_after_first_row, manifest, processes_mentioning, run_study, sample_records,
-    scene_file,
+    collide, interrupt_after_first_row, manifest, processes_mentioning, report_of, run_study,
+    sample_records, scene_file,
 };
 
 const BACKENDS: &str = "[backends]\nserial = true\nrayon = [2]\n";
@@ -252,22 +252,6 @@ fn tiny_study(body: &str) -> (tempfile::TempDir, std::path::PathBuf, Vec<Record>
     let results = out.join("tiny");
     let rows = records::read(&records::files_in(&results).unwrap()[0]).unwrap();
     (dir, results, rows)
-}
-
-/// `collide report RESULTS --out REPORTS`, which must succeed; the text of its report.md.
-fn report_of(results: &std::path::Path, reports: &std::path::Path) -> String {
-    let report = collide(&[
-        "report",
-        results.to_str().unwrap(),
-        "--out",
-        reports.to_str().unwrap(),
-    ]);
-    assert!(
-        report.status.success(),
-        "{}",
-        String::from_utf8_lossy(&report.stderr)
-    );
-    std::fs::read_to_string(reports.join("report.md")).unwrap()
 }
 
 #[test]

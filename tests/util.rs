@@ -204,3 +204,19 @@ pub fn rayon_refuses(method: &str) {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("serial backend only"), "{stderr}");
 }
+
+/// `collide report RESULTS --out REPORTS`, which must succeed; the text of its report.md.
+pub fn report_of(results: &std::path::Path, reports: &std::path::Path) -> String {
+    let report = collide(&[
+        "report",
+        results.to_str().unwrap(),
+        "--out",
+        reports.to_str().unwrap(),
+    ]);
+    assert!(
+        report.status.success(),
+        "{}",
+        String::from_utf8_lossy(&report.stderr)
+    );
+    std::fs::read_to_string(reports.join("report.md")).unwrap()
+}

@@ -307,8 +307,8 @@ fn observed_summary(
     last: &StateSums,
 ) -> RunSummary {
     let counters = &measured.counters;
-    let observed =
-        (measured.accuracy.series.as_deref()).and_then(|blocks| analyse(blocks, outcome.n));
+    let observed = (measured.accuracy.series.as_deref())
+        .and_then(|blocks| analyse(blocks, outcome.n, prepared.discard));
     let production = observed.and_then(|o| o.settled);
     let means = production.or(observed.map(|o| o.from_zero));
     let area = prepared.scene.domain.area();
@@ -329,6 +329,7 @@ fn observed_summary(
             .map(|p| p.compressibility_z.mean)
             .or(outcome.thermo.compressibility_z),
         equilibrated: observed.map(|o| o.settled.is_some()),
+        equilibration_cut: observed.map(|o| o.discard.rule().to_owned()),
         equilibration_cut_time: production.map(|p| p.cut_time),
         compressibility_z_from_zero: observed.map(|o| o.from_zero.compressibility_z.mean),
         compressibility_z_se: production.map(|p| p.compressibility_z.se),

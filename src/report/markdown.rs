@@ -14,11 +14,12 @@ use crate::report::analysis::{Baseline, MIN_WORKER_COUNTS, Setup, TIMING_CONFIDE
 use crate::report::figures::cooling::COOLING_FILE;
 use crate::report::figures::history::{HISTORY_FILE, checks};
 use crate::report::figures::scaling::Figure;
-use crate::report::units::{TimeUnit, duration};
+use crate::report::units::{TimeUnit, duration, significant};
 use crate::run::backend_kind::BackendKind;
 use crate::study::history::Entry;
 use crate::study::manifest::Scaling;
 use crate::study::records::{Record, STATUS_OK};
+use crate::study::replicas::{self, DISAGREEMENT, OBSERVABLES, ReplicaGroup};
 
 /// The seed report's Cuadro 1: 1000 disks, 400 cycles.
 const SEED_N: u64 = 1000;
@@ -83,6 +84,12 @@ pub fn markdown(records: &[Record], setups: &[Setup], source: &str, pictures: &P
     }
     environment(&mut out, first, records);
     warnings(&mut out, records, setups);
+    let groups: Vec<ReplicaGroup> = replicas::checks(records)
+        .into_iter()
+        .map(|(_, group)| group)
+        .collect();
+    replica_warnings(&mut out, &groups);
+    replica_section(&mut out, &groups);
     if let Some(section) = &pictures.accuracy {
         accuracy_section(&mut out, section);
     }
@@ -187,6 +194,81 @@ fn warnings(out: &mut String, records: &[Record], setups: &[Setup]) {
             "> **Warning: {failed} run(s) failed or timed out**; they are left out of every figure below.\n"
         );
     }
+}
+
+/// Calls out each observable whose spread over seeds disagrees with the runs' own
+/// error bars by more than [`DISAGREEMENT`]× ([`replicas`]).
+fn replica_warnings(out: &mut String, groups: &[ReplicaGroup]) {
+    for group in groups {
+        for (observable, check) in OBSERVABLES.iter().zip(&group.checks) {
+            if !check.disagrees() {
+                continue;
+            }
+            let ratio = check.ratio();
+            let meaning = match ratio > DISAGREEMENT {
+                true => {
+                    "the runs' blocked error bars are too small (correlations longer than \
+                         their blocks): trust the replica SE, or run longer"
+                }
+                false => {
+                    "the seeds agree better than their error bars say (with few seeds \
+                          the replica SE is itself uncertain): add seeds before trusting \
+                          either"
+                }
+            };
+            let _ = writeln!(
+                out,
+                "> **Warning: error bars disagree with the spread over seeds.** {} of {} \
+                 over {} seeds: replica SE {}, {}× the within-run SE {}; {meaning}.\n",
+                observable.name,
+                group.label,
+                group.seeds.len(),
+                significant(check.replica.se, 3),
+                significant(ratio, 2),
+                significant(check.within_se, 3),
+            );
+        }
+    }
+}
+
+/// The observables of each setup run with several seeds: their replica mean, its
+/// standard error and 95% interval, beside the within-run error ([`replicas`]).
+fn replica_section(out: &mut String, groups: &[ReplicaGroup]) {
+    if groups.is_empty() {
+        return;
+    }
+    let _ = writeln!(out, "## Replicas: the spread over seeds\n");
+    let _ = writeln!(
+        out,
+        "Runs of one setup that differ only in their seed are independent measurements. The \
+         replica SE is the standard deviation of the seeds' means over √R, the 95% interval \
+         Student's t with R − 1 degrees of freedom; the within-run SE, √(Σ SE_r²)/R, is what \
+         the runs' own blocked error bars say of the same mean. Only runs that equilibrated \
+         count. A ratio beyond {DISAGREEMENT}× either way is **bold**.\n"
+    );
+    let _ = writeln!(
+        out,
+        "| setup | seeds | observable | replica mean ± SE | 95% | within-run SE | ratio |\n\
+         | --- | --- | --- | ---: | ---: | ---: | ---: |"
+    );
+    for group in groups {
+        let seeds: Vec<String> = group.seeds.iter().map(u64::to_string).collect();
+        for (observable, check) in OBSERVABLES.iter().zip(&group.checks) {
+            let _ = writeln!(
+                out,
+                "| {} | {} | {} | {} ± {} | ± {} | {} | {} |",
+                group.label,
+                seeds.join(", "),
+                observable.name,
+                significant(check.replica.mean, 6),
+                significant(check.replica.se, 3),
+                significant(check.replica.half_width_95, 3),
+                significant(check.within_se, 3),
+                bold_if(check.disagrees(), significant(check.ratio(), 2)),
+            );
+        }
+    }
+    let _ = writeln!(out);
 }
 
 /// The CPUs a study could run on; the machine's logical cores in files that did not

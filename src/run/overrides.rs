@@ -11,14 +11,15 @@ use toml::Spanned;
 use crate::run::spec::{MethodChoice, Observe};
 use crate::sim::Broadphase;
 
-/// A time step as written: a number or the word "auto".
+/// A value written as a number or a word: a time step (0.01 or "auto"), a discard
+/// (200.0, "30%" or "auto"). [`crate::run::scene_file`] validates it for its field.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(
     untagged,
-    expecting = "expected a time step: a number such as 0.01, or \"auto\""
+    expecting = "expected a number such as 0.01, or a word in quotes such as \"auto\""
 )]
-pub enum DtValue {
-    Seconds(f64),
+pub enum NumberOrWord {
+    Number(f64),
     Word(String),
 }
 
@@ -51,11 +52,11 @@ impl OverrideValue for f64 {
     }
 }
 
-impl OverrideValue for DtValue {
+impl OverrideValue for NumberOrWord {
     fn text(&self) -> String {
         match self {
-            DtValue::Seconds(dt) => dt.to_string(),
-            DtValue::Word(word) => word.clone(),
+            NumberOrWord::Number(number) => number.to_string(),
+            NumberOrWord::Word(word) => word.clone(),
         }
     }
 }
@@ -155,7 +156,7 @@ overrides! {
     packing: f64,
     /// Time step, or "auto".
     #[arg(long, value_parser = parse_dt, allow_hyphen_values = true)]
-    dt: DtValue,
+    dt: NumberOrWord,
     /// Number of steps.
     #[arg(long, allow_hyphen_values = true)]
     steps: i64,
@@ -185,6 +186,11 @@ overrides! {
     /// it false); serial and rayon backends only.
     #[arg(long, num_args = 0..=1, default_missing_value = "true", require_equals = true)]
     draw: bool,
+    /// How much of the run to drop before averaging its observables: a simulated time
+    /// (200), a share of the run ("30%"), or "auto" (the default: MSER-5 finds the end of
+    /// the transient).
+    #[arg(long, value_parser = parse_discard, allow_hyphen_values = true)]
+    discard: NumberOrWord,
 }
 
 /// Adds the list `values` of the override `key` (if given) to `lists`.
@@ -205,13 +211,21 @@ fn swept_list<T: Clone + 'static>(
     }
 }
 
-fn parse_dt(text: &str) -> Result<DtValue, String> {
+fn parse_dt(text: &str) -> Result<NumberOrWord, String> {
     if text == "auto" {
-        return Ok(DtValue::Word(text.to_owned()));
+        return Ok(NumberOrWord::Word(text.to_owned()));
     }
     text.parse::<f64>()
-        .map(DtValue::Seconds)
+        .map(NumberOrWord::Number)
         .map_err(|_| format!("expected a number or \"auto\", got \"{text}\""))
+}
+
+/// A number, else a word that the scene's validation judges (naming the flag).
+fn parse_discard(text: &str) -> Result<NumberOrWord, String> {
+    Ok(text.parse::<f64>().map_or_else(
+        |_| NumberOrWord::Word(text.to_owned()),
+        NumberOrWord::Number,
+    ))
 }
 
 fn parse_seed(text: &str) -> Result<u64, String> {

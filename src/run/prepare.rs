@@ -68,6 +68,7 @@ impl RunSpec {
             method: choice.method,
             event,
             observe: self.method.observe,
+            discard: self.method.discard,
         })
     }
 }

@@ -9,17 +9,19 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::run::overrides::{DtValue, Overrides};
+use crate::run::overrides::{NumberOrWord, Overrides};
 use crate::run::scene_limits::{self, Field};
 use crate::run::spec::{
-    DEFAULT_DT_FRACTION, DEFAULT_MISSED_TOLERANCE, DtChoice, InjectedSlowdown, Method,
+    DEFAULT_DT_FRACTION, DEFAULT_MISSED_TOLERANCE, Discard, DtChoice, InjectedSlowdown, Method,
     MethodChoice, MethodSpec, Observe, RunSpec, SceneSource,
 };
 use crate::sim::grid::StripGrid;
+use crate::sim::observe::SERIES_BLOCKS;
 use crate::sim::scene::{
     Extent, GasSpec, MassRule, Placement, RadiusDistribution, check_periodic_box,
 };
 use crate::sim::{Boundary, Broadphase, Disk, Domain, Particles, Physics, Scene};
+use crate::stats::observables::MIN_KEPT_BLOCKS;
 use crate::system::input::{MAX_TEXT_BYTES, read_text};
 
 #[derive(Debug, thiserror::Error)]
@@ -139,7 +141,7 @@ struct RawParticle {
 #[derive(Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 struct RawMethod {
-    dt: Option<Spanned<DtValue>>,
+    dt: Option<Spanned<NumberOrWord>>,
     dt_fraction: Option<Spanned<f64>>,
     steps: Option<Spanned<i64>>,
     broadphase: Option<Spanned<Broadphase>>,
@@ -147,6 +149,7 @@ struct RawMethod {
     missed_tolerance: Option<Spanned<f64>>,
     tc: Option<Spanned<f64>>,
     observe: Option<Spanned<Observe>>,
+    discard: Option<Spanned<NumberOrWord>>,
 }
 
 /// What an explicit scene's disks take where they give no radius or mass.
@@ -246,6 +249,7 @@ impl Validator<'_> {
             .pick("--observe", overrides.observe, &raw.observe, |o| *o)
             .map_or(Observe::Timing, |sourced| sourced.value);
         let tc = self.tc(raw, overrides)?;
+        let discard = self.discard(raw, overrides, dt, steps)?;
         Ok(MethodSpec {
             dt,
             steps,
@@ -255,6 +259,7 @@ impl Validator<'_> {
             tc,
             observe,
             draw: overrides.draw.unwrap_or(false),
+            discard,
         })
     }
 
@@ -296,15 +301,15 @@ impl Validator<'_> {
             });
         };
         match value {
-            DtValue::Word(word) if word == "auto" => Ok(tolerance_or(explicit_fraction)),
-            DtValue::Seconds(dt) if dt > 0.0 && dt.is_finite() => Ok(DtChoice::Fixed(dt)),
-            DtValue::Seconds(dt) => Err(self.invalid(
+            NumberOrWord::Word(word) if word == "auto" => Ok(tolerance_or(explicit_fraction)),
+            NumberOrWord::Number(dt) if dt > 0.0 && dt.is_finite() => Ok(DtChoice::Fixed(dt)),
+            NumberOrWord::Number(dt) => Err(self.invalid(
                 origin,
                 "method.dt",
                 format!("is {dt}, not a positive number"),
                 "give a positive time step, e.g. dt = 0.01, or dt = \"auto\"",
             )),
-            DtValue::Word(word) => Err(self.invalid(
+            NumberOrWord::Word(word) => Err(self.invalid(
                 origin,
                 "method.dt",
                 format!("is \"{word}\""),
@@ -326,6 +331,101 @@ impl Validator<'_> {
             ));
         }
         Ok(Some(value))
+    }
+
+    /// How much of the run to drop before averaging its observables: "auto" (MSER-5,
+    /// also when absent), a simulated time, or a share of the run ("30%"). A discard
+    /// must leave [`MIN_KEPT_BLOCKS`] of the run's blocks to average; a time is checked
+    /// against the run's end where dt is given (with dt = "auto", the summary says so
+    /// when too little is left).
+    fn discard(
+        &self,
+        raw: &RawMethod,
+        overrides: &Overrides,
+        dt: DtChoice,
+        steps: u64,
+    ) -> Result<Discard, SceneFileError> {
+        let Some(Sourced { value, origin }) = self.pick(
+            "--discard",
+            overrides.discard.clone(),
+            &raw.discard,
+            Clone::clone,
+        ) else {
+            return Ok(Discard::Automatic);
+        };
+        let refuse =
+            |problem: String, fix: &str| self.invalid(origin, "method.discard", problem, fix);
+        let forms = "give a simulated time to drop from the start (discard = 200.0), a share \
+                     of the run (discard = \"30%\"), or discard = \"auto\" (MSER-5 finds it)";
+        // The latest cut that leaves MIN_KEPT_BLOCKS blocks: the end of the block before
+        // them, in steps (block j ends at step ⌈j·steps/blocks⌉).
+        let blocks = u128::from(SERIES_BLOCKS.min(steps));
+        let kept = MIN_KEPT_BLOCKS as u128;
+        let last_cut = match blocks > kept {
+            true => ((blocks - kept) * u128::from(steps)).div_ceil(blocks) as f64,
+            false => 0.0,
+        };
+        let leaves_too_little = |what: String, most: String| {
+            refuse(
+                format!(
+                    "is {what}, which leaves fewer than {MIN_KEPT_BLOCKS} of the run's {blocks} \
+                     blocks ({steps} steps) to average"
+                ),
+                &format!("discard at most {most}, or run longer"),
+            )
+        };
+        let discard = match value {
+            NumberOrWord::Word(word) if word == "auto" => return Ok(Discard::Automatic),
+            NumberOrWord::Number(time) if time >= 0.0 && time.is_finite() => Discard::Time(time),
+            NumberOrWord::Number(time) => {
+                return Err(refuse(
+                    format!("is {time}, not a simulated time ≥ 0"),
+                    forms,
+                ));
+            }
+            NumberOrWord::Word(word) => {
+                let percent = word
+                    .strip_suffix('%')
+                    .and_then(|p| p.trim().parse::<f64>().ok());
+                match percent {
+                    Some(percent) if (0.0..100.0).contains(&percent) => {
+                        Discard::Fraction(percent / 100.0)
+                    }
+                    Some(percent) if percent >= 100.0 => {
+                        return Err(refuse(
+                            format!("is {percent}%, the whole run: nothing is left to average"),
+                            forms,
+                        ));
+                    }
+                    _ => {
+                        return Err(refuse(
+                            format!("is \"{word}\", neither a share of the run nor \"auto\""),
+                            forms,
+                        ));
+                    }
+                }
+            }
+        };
+        let slack = 1.0 + 1e-9;
+        match (discard, dt) {
+            (Discard::Fraction(fraction), _) if fraction * steps as f64 > last_cut * slack => {
+                Err(leaves_too_little(
+                    format!("{}%", 100.0 * fraction),
+                    format!("\"{}%\"", (100.0 * last_cut / steps as f64).floor()),
+                ))
+            }
+            (Discard::Time(time), DtChoice::Fixed(dt)) if time >= steps as f64 * dt => Err(refuse(
+                format!(
+                    "is t = {time}, past the end of the run at t = {} ({steps} steps of dt = {dt})",
+                    steps as f64 * dt
+                ),
+                &format!("discard at most {}, or run longer", last_cut * dt),
+            )),
+            (Discard::Time(time), DtChoice::Fixed(dt)) if time > last_cut * dt * slack => Err(
+                leaves_too_little(format!("t = {time}"), format!("{}", last_cut * dt)),
+            ),
+            _ => Ok(discard),
+        }
     }
 
     /// The TC model time of the event method, if given.

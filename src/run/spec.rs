@@ -11,6 +11,7 @@ use crate::sim::event::EventParams;
 use crate::sim::scene::{Extent, GasSpec, Placement, RSA_JAMMING_PACKING};
 use crate::sim::step::StepParams;
 use crate::sim::{Broadphase, Particles, Scene};
+pub use crate::stats::observables::Discard;
 
 /// Where the disks come from.
 #[derive(Clone, Debug, PartialEq)]
@@ -124,6 +125,8 @@ pub struct MethodSpec {
     /// Draw the whole box offscreen after every step (the live view's renderer, timed
     /// apart from the stepping loop); serial and rayon backends only.
     pub draw: bool,
+    /// How much of the run to drop before averaging its observables.
+    pub discard: Discard,
 }
 
 impl MethodSpec {
@@ -138,6 +141,7 @@ impl MethodSpec {
             tc: None,
             observe: Observe::Timing,
             draw: false,
+            discard: Discard::Automatic,
         }
     }
 }
@@ -205,6 +209,8 @@ pub struct PreparedRun {
     /// The event method's settings (its TC time resolved); unused by the step method.
     pub event: EventParams,
     pub observe: Observe,
+    /// How much of the run to drop before averaging its observables.
+    pub discard: Discard,
 }
 
 /// What a run's summary needs to know of its initial disks.

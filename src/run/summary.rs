@@ -5,7 +5,7 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
-use crate::stats::observables::MIN_EFFECTIVE_POINTS;
+use crate::stats::observables::{MANUAL_CUT, MIN_EFFECTIVE_POINTS, MIN_KEPT_BLOCKS};
 use crate::stats::reference::{Reference, z_score};
 
 /// One run's measurements. Field names are a public interface: scripts and the study
@@ -147,11 +147,16 @@ pub struct RunSummary {
     #[serde(default)]
     pub compressibility_z: Option<f64>,
     /// Whether the run's observables settled: true when the block series was cut (by
-    /// MSER-5) and collision_rate, temperature, pressure and compressibility_z are means
-    /// after the cut; false ("not equilibrated: run longer") when they are averages from
-    /// t = 0; null where no series was recorded (MPI, a state at rest).
+    /// MSER-5 in its first half, or by the scene's manual `discard`) and collision_rate,
+    /// temperature, pressure and compressibility_z are means after the cut; false ("not
+    /// equilibrated: run longer", or a discard that left too little) when they are
+    /// averages from t = 0; null where no series was recorded (a state at rest).
     #[serde(default)]
     pub equilibrated: Option<bool>,
+    /// Which rule placed the cut: `mser5` (found by MSER-5) or `manual` (the scene's
+    /// `discard`); null where no series was recorded.
+    #[serde(default)]
+    pub equilibration_cut: Option<String>,
     /// Simulated time cut from the start as the transient (null unless equilibrated).
     #[serde(default)]
     pub equilibration_cut_time: Option<f64>,
@@ -399,9 +404,13 @@ impl RunSummary {
             (Some(true), Some(z), Some(se)) => {
                 writeln!(
                     f,
-                    "equilibrium cut at t = {:.4e} (MSER-5); Z = {z:.5} ± {se:.5} (g = {:.2}, \
+                    "equilibrium cut at t = {:.4e} ({}); Z = {z:.5} ± {se:.5} (g = {:.2}, \
                      N_eff = {:.0}; from t = 0: {})",
                     self.equilibration_cut_time.unwrap_or(0.0),
+                    match self.manual_cut() {
+                        true => "manual discard",
+                        false => "MSER-5",
+                    },
                     self.compressibility_z_g.unwrap_or(f64::NAN),
                     self.compressibility_z_n_eff.unwrap_or(f64::NAN),
                     self.compressibility_z_from_zero
@@ -414,8 +423,9 @@ impl RunSummary {
             }
             (Some(false), ..) => writeln!(
                 f,
-                "equilibrium not equilibrated: run longer (the observables above are averages \
-                 from t = 0, transient included)"
+                "equilibrium {} (the observables above are averages from t = 0, transient \
+                 included)",
+                self.unsettled()
             ),
             _ => Ok(()),
         }?;
@@ -441,12 +451,28 @@ impl RunSummary {
                 "this run {z:.5} ± {se:.5}, z-score {:+.2}",
                 z_score(z, se, &reference)
             ),
-            _ => "this run not equilibrated: run longer (no comparison)".to_owned(),
+            _ => format!("this run {} (no comparison)", self.unsettled()),
         };
         writeln!(
             f,
             "reference  Z = {z_ref:.5} ± {se_ref:.5} ({source}); {comparison}"
         )
+    }
+
+    /// Whether the cut was the scene's manual `discard` rather than MSER-5's.
+    fn manual_cut(&self) -> bool {
+        self.equilibration_cut.as_deref() == Some(MANUAL_CUT)
+    }
+
+    /// Why a run with a series has no production window, in words.
+    fn unsettled(&self) -> String {
+        match self.manual_cut() {
+            true => format!(
+                "has too little left after its discard (fewer than {MIN_KEPT_BLOCKS} blocks): \
+                 discard less or run longer"
+            ),
+            false => "not equilibrated: run longer".to_owned(),
+        }
     }
 
     /// Sentences flagging an error bar that cannot be trusted: too few independent

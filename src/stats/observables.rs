@@ -1,7 +1,8 @@
 //! A run's observables from its block series (`sim::observe::Block`): the equilibration
-//! cut (MSER-5 on the blocks' compressibility factor, the same cut for every
-//! observable), then each observable's mean over the production blocks with its
-//! blocked standard error and statistical inefficiency; and the same from t = 0.
+//! cut (MSER-5 on the blocks' compressibility factor, or the user's manual discard; the
+//! same cut for every observable), then each observable's mean over the production
+//! blocks with its blocked standard error and statistical inefficiency; and the same
+//! from t = 0.
 
 use crate::sim::observe::Block;
 use crate::stats::series::{Cut, Estimate, mser5, ratio_estimate};
@@ -9,14 +10,65 @@ use crate::stats::series::{Cut, Estimate, mser5, ratio_estimate};
 /// Fewer independent points than this: the error bar is itself uncertain (flagged).
 pub const MIN_EFFECTIVE_POINTS: f64 = 50.0;
 
-/// What a run's series says: its observables from t = 0 and, where MSER-5 found the
-/// end of the transient, after it. `settled` is `None` when MSER-5's minimum fell in the
-/// second half or the run has fewer than `MSER_MIN_POINTS` blocks: "not equilibrated:
-/// run longer".
+/// How much of a run to drop before averaging its observables: found by MSER-5, or
+/// said by the user (`discard` in a scene's `[method]`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Discard {
+    /// MSER-5 finds the end of the transient.
+    #[default]
+    Automatic,
+    /// The first `time` units of simulated time (≥ 0).
+    Time(f64),
+    /// This fraction of the simulated time the run reached, in [0, 1).
+    Fraction(f64),
+}
+
+/// The names of the two rules in the JSON summary and the records.
+pub const MSER5_CUT: &str = "mser5";
+pub const MANUAL_CUT: &str = "manual";
+
+impl Discard {
+    /// The rule's name: [`MSER5_CUT`] or [`MANUAL_CUT`].
+    pub fn rule(self) -> &'static str {
+        match self {
+            Discard::Automatic => MSER5_CUT,
+            Discard::Time(_) | Discard::Fraction(_) => MANUAL_CUT,
+        }
+    }
+
+    /// The blocks a manual discard drops: every block that starts before the discarded
+    /// time (so the cut is rounded up to the next block's end); `None` for MSER-5.
+    fn blocks_dropped(self, blocks: &[Block]) -> Option<usize> {
+        let reached = blocks.last().map_or(0.0, |b| b.end);
+        let time = match self {
+            Discard::Automatic => return None,
+            Discard::Time(time) => time,
+            Discard::Fraction(fraction) => fraction * reached,
+        };
+        // A block's end equal to the discarded time up to rounding counts as reaching it.
+        let time = time - 1e-9 * reached;
+        let ends_before = blocks.iter().filter(|b| b.end < time).count();
+        Some(match time > 0.0 {
+            true => (ends_before + 1).min(blocks.len()),
+            false => 0,
+        })
+    }
+}
+
+/// Fewest blocks a manual discard must leave to average.
+pub const MIN_KEPT_BLOCKS: usize = 2;
+
+/// What a run's series says: its observables from t = 0 and, where the cut found (or
+/// was told) the end of the transient, after it. `settled` is `None` when MSER-5's
+/// minimum fell in the second half or the run has fewer than `MSER_MIN_POINTS` blocks
+/// ("not equilibrated: run longer"), or when a manual discard leaves fewer than
+/// [`MIN_KEPT_BLOCKS`] blocks.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Observed {
     pub from_zero: Production,
     pub settled: Option<Production>,
+    /// The rule that chose the cut.
+    pub discard: Discard,
 }
 
 /// The observables over the blocks after a cut.
@@ -34,24 +86,30 @@ pub struct Production {
     pub temperature: Estimate,
 }
 
-/// The observables of `n` disks from the run's blocks, from t = 0 and after the MSER-5
-/// cut. `None` without at least two blocks or for a state at rest (no kinetic energy to
-/// measure a pressure against).
-pub fn analyse(blocks: &[Block], n: usize) -> Option<Observed> {
+/// The observables of `n` disks from the run's blocks, from t = 0 and after the cut
+/// `discard` gives (MSER-5's, or the manual one). `None` without at least two blocks or
+/// for a state at rest (no kinetic energy to measure a pressure against).
+pub fn analyse(blocks: &[Block], n: usize, discard: Discard) -> Option<Observed> {
     if blocks.len() < 2 || blocks.iter().any(|b| b.kinetic_integral <= 0.0) {
         return None;
     }
-    let z: Vec<f64> = blocks
-        .iter()
-        .map(|b| 1.0 + b.virial / (2.0 * b.kinetic_integral))
-        .collect();
-    let settled = match mser5(&z) {
-        Cut::At(start) => Some(production(blocks, start, n)),
-        Cut::NotEquilibrated => None,
-    };
+    let start = discard.blocks_dropped(blocks).map_or_else(
+        || {
+            let z: Vec<f64> = blocks
+                .iter()
+                .map(|b| 1.0 + b.virial / (2.0 * b.kinetic_integral))
+                .collect();
+            match mser5(&z) {
+                Cut::At(start) => Some(start),
+                Cut::NotEquilibrated => None,
+            }
+        },
+        |dropped| (blocks.len() - dropped >= MIN_KEPT_BLOCKS).then_some(dropped),
+    );
     Some(Observed {
         from_zero: production(blocks, 0, n),
-        settled,
+        settled: start.map(|start| production(blocks, start, n)),
+        discard,
     })
 }
 
@@ -106,7 +164,7 @@ mod tests {
     fn a_melting_start_is_cut_and_the_rest_averaged() {
         let mut z = vec![9.0; 20];
         z.extend((0..108).map(|k| 4.0 + 0.01 * f64::from(k % 3) - 0.01));
-        let observed = analyse(&blocks(&z), 10).unwrap();
+        let observed = analyse(&blocks(&z), 10, Discard::Automatic).unwrap();
         let p = observed.settled.unwrap();
         assert_eq!(p.kept_blocks, 108);
         assert_eq!(p.cut_time, 20.0);
@@ -123,12 +181,53 @@ mod tests {
 
     #[test]
     fn a_run_too_short_or_still_melting_is_not_equilibrated() {
-        let short = analyse(&blocks(&[5.0; MSER_MIN_POINTS - 1]), 10).unwrap();
+        let short = analyse(&blocks(&[5.0; MSER_MIN_POINTS - 1]), 10, Discard::Automatic).unwrap();
         assert_eq!(short.settled, None);
         assert!((short.from_zero.compressibility_z.mean - 5.0).abs() < 1e-12);
         let melting: Vec<f64> = (0..128)
             .map(|k| 4.0 + 5.0 * (-k as f64 / 300.0).exp())
             .collect();
-        assert_eq!(analyse(&blocks(&melting), 10).unwrap().settled, None);
+        assert_eq!(
+            analyse(&blocks(&melting), 10, Discard::Automatic)
+                .unwrap()
+                .settled,
+            None
+        );
+    }
+
+    #[test]
+    fn a_manual_discard_averages_from_the_block_end_at_or_after_it() {
+        // Z = 9 over the first 10 units, then 4: MSER-5 would cut at 10.
+        let mut z = vec![9.0; 10];
+        z.extend([4.0; 30]);
+        let blocks = blocks(&z);
+        let window = |discard| analyse(&blocks, 10, discard).unwrap().settled.unwrap();
+        // 25% of t = 40 is t = 10, a block's end: the window starts there.
+        let quarter = window(Discard::Fraction(0.25));
+        assert_eq!((quarter.cut_time, quarter.kept_blocks), (10.0, 30));
+        assert_eq!(quarter.compressibility_z.mean, 4.0);
+        // A time inside a block rounds up to that block's end.
+        let time = window(Discard::Time(4.5));
+        assert_eq!((time.cut_time, time.kept_blocks), (5.0, 35));
+        assert!((time.compressibility_z.mean - (5.0 * 9.0 + 30.0 * 4.0) / 35.0).abs() < 1e-12);
+        // Nothing discarded: the average from t = 0.
+        let none = window(Discard::Time(0.0));
+        assert_eq!((none.cut_time, none.kept_blocks), (0.0, 40));
+        let observed = analyse(&blocks, 10, Discard::Fraction(0.0)).unwrap();
+        assert_eq!(observed.settled, Some(observed.from_zero));
+        assert_eq!(observed.discard.rule(), "manual");
+        // A discard that leaves fewer than two blocks (a run cut short) averages nothing.
+        for discard in [
+            Discard::Time(39.5),
+            Discard::Time(100.0),
+            Discard::Fraction(0.99),
+        ] {
+            assert_eq!(
+                analyse(&blocks, 10, discard).unwrap().settled,
+                None,
+                "{discard:?}"
+            );
+        }
+        assert_eq!(window(Discard::Time(38.0)).kept_blocks, 2);
     }
 }

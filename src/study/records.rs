@@ -16,7 +16,7 @@ use crate::study::environment::Environment;
 use crate::study::manifest::{PLACEMENT_KEYS, Scaling};
 use crate::system::output::write_atomically;
 
-pub const SCHEMA_VERSION: u32 = 13;
+pub const SCHEMA_VERSION: u32 = 14;
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
 const OLDEST_READABLE_VERSION: u32 = 1;
 
@@ -92,6 +92,14 @@ const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
     (13, "load_imbalance", Fill::F64(f64::NAN)),
     // Version 12 did not record where each rank ran.
     (13, "rank_cpus", Fill::Str("")),
+    // Version 13 did not say which rule cut the series (every cut was MSER-5's), nor
+    // compare the seeds of a setup.
+    (14, "equilibration_cut", Fill::Str("")),
+    (14, "compressibility_z_replica_mean", Fill::F64(f64::NAN)),
+    (14, "compressibility_z_replica_se", Fill::F64(f64::NAN)),
+    (14, "collision_rate_replica_mean", Fill::F64(f64::NAN)),
+    (14, "collision_rate_replica_se", Fill::F64(f64::NAN)),
+    (14, "replicas", Fill::NullU64),
 ];
 
 /// What became of one run.
@@ -270,11 +278,28 @@ impl Record {
         entries.join(";")
     }
 
+    /// The setup without its seed: what the runs of other seeds of it share, the
+    /// replicas of one measurement ([`crate::study::replicas`]).
+    pub fn replica_key(&self) -> String {
+        let setup = self.setup_key();
+        let entries: Vec<&str> = setup
+            .split(';')
+            .filter(|entry| !entry.starts_with("seed="))
+            .collect();
+        entries.join(";")
+    }
+
     /// The setup in words for tables: the scene, n, then every value the configuration
     /// set.
     pub fn setup_label(&self) -> String {
+        self.label_without(&[])
+    }
+
+    /// The setup in words but the settings named in `shown`: the scene, n, then every
+    /// other value the configuration set.
+    pub fn label_without(&self, shown: &[&str]) -> String {
         let mut words = vec![self.scene.clone(), format!("n={}", self.n)];
-        words.extend(self.settings(&[]));
+        words.extend(self.settings(shown));
         words.join(" ")
     }
 
@@ -409,7 +434,7 @@ macro_rules! for_each_column {
                  rustc, profile, features, git_commit, mpi_library, study_started_utc,
                  finished_utc, method <- run, observe <- run, choice <- run,
                  temperature_curve <- run, cpu_affinity, ab_side, scene_hash, job_id,
-                 node_list, rank_cpus <- run;
+                 node_list, rank_cpus <- run, equilibration_cut <- run;
             u64: threads <- run, ranks <- run, workers <- run, n <- run, steps <- run,
                  pair_collisions <- run, wall_collisions <- run, logical_cores, physical_cores,
                  memory_bytes;
@@ -429,10 +454,12 @@ macro_rules! for_each_column {
                  energy_relative_error <- run, rms_step_over_radius <- run,
                  collapse_time <- run, tc <- run, queue_wait_s,
                  equilibration_cut_time <- run, compressibility_z_se <- run,
-                 compressibility_z_g <- run, collision_rate_se <- run, temperature_se <- run;
+                 compressibility_z_g <- run, collision_rate_se <- run, temperature_se <- run,
+                 compressibility_z_replica_mean, compressibility_z_replica_se,
+                 collision_rate_replica_mean, collision_rate_replica_se;
             bool: oversubscribed <- run, git_dirty;
             opt_u64: seed <- run, missed_collisions <- run, collapse_guard_fired <- run,
-                 usable_cpus
+                 usable_cpus, replicas
         }
     };
 }
@@ -642,9 +669,13 @@ fn upgrade(frame: &DataFrame, version: u32) -> anyhow::Result<DataFrame> {
     Ok(frame)
 }
 
-/// Writes the records to `path` atomically (Parquet, zstd).
+/// Writes the records to `path` atomically (Parquet, zstd), their replica columns
+/// filled from the rows written ([`crate::study::replicas::fill`]: a statistic over the
+/// seeds of a setup, brought up to date as each run adds its row).
 pub fn write(path: &Path, records: &[Record]) -> anyhow::Result<()> {
-    write_frame(path, &mut to_frame(records)?, "the records")
+    let mut rows = records.to_vec();
+    crate::study::replicas::fill(&mut rows);
+    write_frame(path, &mut to_frame(&rows)?, "the records")
 }
 
 /// Writes `frame` (`what` it holds, for the message) to `path` atomically (Parquet, zstd).
