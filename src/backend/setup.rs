@@ -277,31 +277,37 @@ pub(crate) fn cut_slabs(per_strip: &[usize], n_ranks: usize) -> Vec<Range<usize>
     slabs
 }
 
-/// Sends every disk to the rank whose slab holds it and returns this rank's.
+/// Sends every disk to the rank whose slab holds it and returns this rank's. Only the
+/// disks that leave are copied: most stay, as a rank's bands lie about where its slab is.
 fn to_slabs<C: Communicator>(
     comm: &C,
-    placed: Particles,
+    mut placed: Particles,
     layout: &StripLayout,
     slabs: &[Range<usize>],
 ) -> Particles {
-    let owner = owners(slabs, layout.n_strips);
+    let (me, owner) = (comm.rank(), owners(slabs, layout.n_strips));
     let mut outgoing = vec![Vec::new(); comm.size()];
+    let mut leaving = Vec::new();
     for idx in 0..placed.len() {
-        placed.pack(idx, &mut outgoing[owner[layout.strip_of(placed.y[idx])]]);
+        let to = owner[layout.strip_of(placed.y[idx])];
+        if to != me {
+            placed.pack(idx, &mut outgoing[to]);
+            leaving.push(idx);
+        }
     }
-    drop(placed);
-    let staying = std::mem::take(&mut outgoing[comm.rank()]);
+    // Highest first, so that the disk moved into a freed slot never is one leaving.
+    for &idx in leaving.iter().rev() {
+        placed.swap_remove(idx);
+    }
     let arrived = comm.exchange(&outgoing);
     drop(outgoing);
-    let n_own = (std::iter::once(&staying).chain(&arrived))
-        .map(|packed| packed.len() / PACKED_LEN)
-        .sum::<usize>();
-    let mut own = Particles::with_capacity(n_own + n_own / SPARE_SHARE);
-    own.unpack_append(&staying);
+    let incoming: usize = arrived.iter().map(|packed| packed.len() / PACKED_LEN).sum();
+    let n_own = placed.len() + incoming;
+    placed.reserve_exact(incoming + n_own / SPARE_SHARE);
     for packed in &arrived {
-        own.unpack_append(packed);
+        placed.unpack_append(packed);
     }
-    own
+    placed
 }
 
 /// The rank that owns each of `n_strips` strips cut into `slabs`.
