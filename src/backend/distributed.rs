@@ -62,7 +62,7 @@ pub fn run<C: Communicator>(
         slabs,
         most_held,
     } = setup::start(comm, spec)?;
-    let initial = whole.state.observables();
+    let initial = prepared.initial.observables;
     let mut rank = RankState::new(
         &prepared.scene,
         own,

@@ -13,9 +13,7 @@ use crate::run::backend_kind::BackendKind;
 use crate::run::spec::{Method, Observe, PreparedRun, RunSpec};
 use crate::sim::Stepper;
 use crate::sim::event::EventSim;
-use crate::sim::observe::{
-    MissedCollisions, SeriesRecorder, StateSums, block_end, observe, temperature,
-};
+use crate::sim::observe::{MissedCollisions, SeriesRecorder, StateSums, block_end, temperature};
 use crate::sim::{Particles, Physics, StepCounters};
 use crate::system::machine::LoopSeconds;
 
@@ -26,7 +24,7 @@ pub fn run(spec: &RunSpec) -> Result<RunOutcome, BackendError> {
     let setup_start = Instant::now();
     let mut prepared = spec.prepare()?;
     let mut particles = prepared.take_particles();
-    let initial = observe(&particles);
+    let initial = prepared.initial.observables;
     let mut curve = Curve::new(&particles, initial.kinetic_energy, &prepared.scene.physics);
     let mut offscreen = Offscreen::when(spec.method.draw, &prepared.scene.domain, &particles);
     let mut stages = StageSeconds::default();

@@ -31,7 +31,7 @@ use crate::sim::grid::{
 use crate::sim::neighbours::{
     DISPLACEMENT_BLOCK, Displacements, PairList, Skin, with_reorder_scratch,
 };
-use crate::sim::observe::{SeriesRecorder, StateSums, block_end, observe};
+use crate::sim::observe::{SeriesRecorder, StateSums, block_end};
 use crate::sim::pieces::{InTurn, MIN_STREAMING_PIECE, Pieces};
 use crate::sim::prefetch::prefetch;
 use crate::sim::resolve::resolve_contacts;
@@ -75,7 +75,7 @@ pub fn run(spec: &RunSpec, threads: NonZeroUsize) -> Result<RunOutcome, BackendE
         &particles,
         threads.get(),
     );
-    let initial = observe(&particles);
+    let initial = prepared.initial.observables;
     let mut offscreen = Offscreen::when(spec.method.draw, &prepared.scene.domain, &particles);
 
     // The observables' blocks, recorded out of both clocks (as the serial backend does).

@@ -55,6 +55,7 @@ impl RunSpec {
                 rms_speed: whole.rms_speed(),
                 min_radius: figures.min_radius,
                 potential_energy: whole.state.potential_energy(),
+                observables: whole.state.observables(),
             },
             scene,
             params: StepParams {

@@ -8,6 +8,7 @@ use serde::Deserialize;
 
 pub use crate::sim::engine::Method;
 use crate::sim::event::EventParams;
+use crate::sim::observe::Observables;
 use crate::sim::scene::{Extent, GasSpec, Placement, RSA_JAMMING_PACKING};
 use crate::sim::step::StepParams;
 use crate::sim::{Broadphase, Particles, Scene};
@@ -223,6 +224,8 @@ pub struct InitialFigures {
     /// The disks' energy in the field ([`crate::sim::observe::potential_energy`]); 0
     /// without gravity.
     pub potential_energy: f64,
+    /// Their kinetic energy and momentum.
+    pub observables: Observables,
 }
 
 impl PreparedRun {
@@ -251,13 +254,13 @@ pub const STEP_BYTES_PER_DISK: u64 = 160;
 pub const EVENT_BYTES_PER_DISK: u64 = 368;
 /// Peak resident bytes of a run before its disks: the program, its libraries, the pool.
 pub const BASE_BYTES: u64 = 32 << 20;
-/// Seconds the set-up (placement, ordering, the first grid) takes per disk of a dilute
-/// gas, from `setup_s` of the command above with `--steps 1`; the cost grows as
-/// 1 / (1 − packing / jamming). Measured (one run each): 0.416 µs
-/// per disk at 10⁷ and packing 0.05, 0.43 µs at 0.3, 1.24 µs at 0.45, 3.38 µs at 10⁶ and
-/// 0.5 (the model: 0.44, 0.88, 2.3, 4.6); the dilute gas sets the constant, and the
-/// note errs long, never short.
-pub const PLACEMENT_S_PER_DISK: f64 = 0.4e-6;
+/// Seconds the set-up (placement in bands, ordering, the first grid and lists) takes per
+/// disk of a dilute gas in one process, from `setup_s` of the command above with
+/// `--steps 1`; the cost grows as 1 / (1 − packing / jamming). Measured (one run each):
+/// 0.54 µs per disk at 10⁷ and packing 0.05, 0.71 µs at 0.3, 1.16 µs at 10⁶ and 0.45,
+/// 4.48 µs at 0.5 (the model: 0.66, 1.33, 3.4, 6.9); the dilute gas sets the constant,
+/// and the note errs long, never short.
+pub const PLACEMENT_S_PER_DISK: f64 = 0.6e-6;
 
 /// What a run will hold, how long building its disks takes and how many steps it
 /// takes, estimated from the spec alone (see [`STEP_BYTES_PER_DISK`] for the

@@ -26,6 +26,7 @@ pub struct Observables {
     pub momentum: [f64; 2],
 }
 
+/// The kinetic energy and momentum of `particles`.
 pub fn observe(particles: &Particles) -> Observables {
     let mut sums = StateSums::default();
     for idx in 0..particles.len() {
@@ -209,19 +210,38 @@ impl SceneSums {
     pub fn of(particles: &Particles, gravity: Option<[f64; 2]>) -> SceneSums {
         let mut sums = SceneSums::default();
         sums.state.disks = particles.len() as u64;
+        let mut fastest_square = 0.0_f64;
         for idx in 0..particles.len() {
             let state = &mut sums.state;
             state.add_motion(particles, idx);
             if let Some(gravity) = gravity {
                 state.potential.add(potential_of(particles, idx, gravity));
             }
-            let (r, vx, vy) = (particles.radius[idx], particles.vx[idx], particles.vy[idx]);
-            state.max_radius = state.max_radius.max(r);
-            sums.min_radius = sums.min_radius.min(r);
-            sums.max_speed = sums.max_speed.max(vx.hypot(vy));
-            sums.area.add(std::f64::consts::PI * r * r);
-            sums.speed_square.add(vx * vx);
-            sums.speed_square.add(vy * vy);
+            let (vx, vy) = (particles.vx[idx], particles.vy[idx]);
+            let speed_square = vx * vx + vy * vy;
+            fastest_square = fastest_square.max(speed_square);
+            sums.speed_square.add(speed_square);
+        }
+        sums.max_speed = fastest_square.sqrt();
+        match particles.radius.shared() {
+            // Equal disks: n equal areas, as an exact product (its value and its error).
+            Some(r) => {
+                let (n, each) = (particles.len() as f64, std::f64::consts::PI * r * r);
+                let product = n * each;
+                sums.area.add(product);
+                sums.area.add(n.mul_add(each, -product));
+                if !particles.is_empty() {
+                    sums.state.max_radius = r;
+                    sums.min_radius = r;
+                }
+            }
+            None => {
+                for r in particles.radius.iter().copied() {
+                    sums.area.add(std::f64::consts::PI * r * r);
+                    sums.state.max_radius = sums.state.max_radius.max(r);
+                    sums.min_radius = sums.min_radius.min(r);
+                }
+            }
         }
         sums
     }

@@ -259,14 +259,16 @@ impl GasPlan {
         self.gas.n_particles
     }
 
-    /// The band's lower and upper height.
+    /// The band's lower and upper height: whole rows of one contact diameter from the
+    /// bottom ([`ROWS_PER_BAND`] of them; the last band takes what is left), so that ids
+    /// in rows within bands are ids in rows of the whole box.
     fn bounds(&self, band: usize) -> (f64, f64) {
-        let (h, n) = (self.domain.height, self.n_bands as f64);
+        let tall = ROWS_PER_BAND * 2.0 * self.max_radius;
         let top = match band + 1 == self.n_bands {
-            true => h,
-            false => h * (band + 1) as f64 / n,
+            true => self.domain.height,
+            false => tall * (band + 1) as f64,
         };
-        (h * band as f64 / n, top)
+        (tall * band as f64, top)
     }
 
     /// The first placement index of `band` (the gas's size past the last band). Random
@@ -594,8 +596,8 @@ impl GasPlan {
         for idx in 0..particles.len() {
             particles.vx[idx] -= drift[0];
             particles.vy[idx] -= drift[1];
-            square.add(particles.vx[idx] * particles.vx[idx]);
-            square.add(particles.vy[idx] * particles.vy[idx]);
+            let (vx, vy) = (particles.vx[idx], particles.vy[idx]);
+            square.add(vx * vx + vy * vy);
         }
         let mean_square = reduce(vec![square])[0].value() / n;
         let scale = match mean_square > 0.0 {

@@ -9,8 +9,16 @@
 //! 2 MiB pages; everything else, and every other platform, is the system allocator's.
 //! The advice changes speed only: bits, results and errors are the same without it
 //! (the kernel may ignore it, as it does when the setting is `never`).
+//!
+//! Large allocations also start at staggered offsets within a 4 KiB page
+//! ([`STAGGER_FROM_BYTES`]). The system allocator maps each large allocation on its own
+//! pages, so arrays of equal length (a disk's x, y, vx and vy) would all start at the
+//! same offset in a page, and the step, reading the same index of each, would find them
+//! in the same first-level cache sets: measured at 2·10⁵ disks, the resolution of
+//! contacts took 2.3× as long as with the arrays apart.
 
 use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// The system allocator, advising the kernel to back large allocations with huge pages.
 pub struct HugePageAllocator;
@@ -22,27 +30,110 @@ const HUGE_PAGE_BYTES: usize = 2 << 20;
 /// call would cost more than it saves.
 pub const MIN_ADVISED_BYTES: usize = 4 * HUGE_PAGE_BYTES;
 
-// SAFETY: every allocation is the system allocator's, returned unchanged; the advice
+/// Allocations of at least this many bytes (and alignment at most [`STAGGER_ALIGN`])
+/// start at one of [`STAGGERS`] offsets in a page, in turn.
+pub const STAGGER_FROM_BYTES: usize = 64 << 10;
+
+/// The offsets are multiples of this, from one of it: a cache line's alignment, and room
+/// before the allocation for the offset itself.
+const STAGGER_ALIGN: usize = 64;
+
+/// Offsets taken in turn: 8 × 512 bytes span a 4 KiB page.
+const STAGGERS: usize = 8;
+const STAGGER_STEP: usize = 512;
+
+/// The next allocation's turn.
+static NEXT_STAGGER: AtomicUsize = AtomicUsize::new(0);
+
+/// Whether an allocation of `layout` is staggered.
+fn is_staggered(layout: Layout) -> bool {
+    layout.size() >= STAGGER_FROM_BYTES && layout.align() <= STAGGER_ALIGN
+}
+
+/// What a staggered allocation of `layout` takes from the system: room for the largest
+/// offset in front.
+fn padded(layout: Layout) -> Layout {
+    let front = STAGGER_ALIGN + (STAGGERS - 1) * STAGGER_STEP;
+    Layout::from_size_align(layout.size() + front, STAGGER_ALIGN).expect("a valid layout")
+}
+
+/// A staggered allocation in `base` (null passes through): the address at the turn's
+/// offset, with the offset written just before it for [`unstaggered`].
+fn staggered(base: *mut u8) -> *mut u8 {
+    if base.is_null() {
+        return base;
+    }
+    let turn = NEXT_STAGGER.fetch_add(1, Ordering::Relaxed) % STAGGERS;
+    let offset = STAGGER_ALIGN + turn * STAGGER_STEP;
+    // SAFETY: `padded` left `offset` bytes (at most its front) before the caller's bytes,
+    // and the offset's word lies in them, aligned (the offset is a multiple of 64).
+    unsafe {
+        let ptr = base.add(offset);
+        ptr.cast::<usize>().sub(1).write(offset);
+        ptr
+    }
+}
+
+/// The system allocation behind a staggered `ptr`.
+///
+/// # Safety
+/// `ptr` came from [`staggered`].
+unsafe fn unstaggered(ptr: *mut u8) -> *mut u8 {
+    // SAFETY: [`staggered`] wrote the offset in the word before `ptr`.
+    unsafe { ptr.sub(ptr.cast::<usize>().sub(1).read()) }
+}
+
+// SAFETY: every allocation is the system allocator's, returned unchanged or (when
+// staggered) at an offset inside a larger one that [`unstaggered`] recovers; the advice
 // only tells the kernel how to back pages the allocation owns.
 unsafe impl GlobalAlloc for HugePageAllocator {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         // SAFETY: the caller's contract, passed on.
-        advised(unsafe { System.alloc(layout) }, layout.size())
+        match is_staggered(layout) {
+            true => staggered(advised(
+                unsafe { System.alloc(padded(layout)) },
+                layout.size(),
+            )),
+            false => advised(unsafe { System.alloc(layout) }, layout.size()),
+        }
     }
 
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
         // SAFETY: the caller's contract, passed on.
-        advised(unsafe { System.alloc_zeroed(layout) }, layout.size())
+        match is_staggered(layout) {
+            true => staggered(advised(
+                unsafe { System.alloc_zeroed(padded(layout)) },
+                layout.size(),
+            )),
+            false => advised(unsafe { System.alloc_zeroed(layout) }, layout.size()),
+        }
     }
 
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        // SAFETY: the caller's contract, passed on.
-        advised(unsafe { System.realloc(ptr, layout, new_size) }, new_size)
+        let new_layout = Layout::from_size_align(new_size, layout.align()).expect("valid");
+        if !is_staggered(layout) && !is_staggered(new_layout) {
+            // SAFETY: the caller's contract, passed on.
+            return advised(unsafe { System.realloc(ptr, layout, new_size) }, new_size);
+        }
+        // SAFETY: the caller's contract: `ptr` holds `layout.size()` bytes, and the new
+        // allocation is another; the old one is freed as it was allocated.
+        unsafe {
+            let new = self.alloc(new_layout);
+            if !new.is_null() {
+                std::ptr::copy_nonoverlapping(ptr, new, layout.size().min(new_size));
+                self.dealloc(ptr, layout);
+            }
+            new
+        }
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: the caller's contract, passed on.
-        unsafe { System.dealloc(ptr, layout) }
+        // SAFETY: the caller's contract, passed on; a staggered allocation is freed from
+        // its start, with the layout it was made with.
+        match is_staggered(layout) {
+            true => unsafe { System.dealloc(unstaggered(ptr), padded(layout)) },
+            false => unsafe { System.dealloc(ptr, layout) },
+        }
     }
 }
 
@@ -83,7 +174,28 @@ fn advise_huge_pages(_ptr: *mut u8, _size: usize) {}
 
 #[cfg(test)]
 mod tests {
-    use super::{HUGE_PAGE_BYTES, MIN_ADVISED_BYTES, whole_huge_pages};
+    use super::{HUGE_PAGE_BYTES, MIN_ADVISED_BYTES, STAGGER_FROM_BYTES, whole_huge_pages};
+
+    /// Large arrays of one length, made one after another, start at different offsets in
+    /// a page, and keep their contents through growth and shrinking.
+    #[test]
+    fn large_arrays_start_apart_in_a_page_and_keep_their_contents() {
+        let n = STAGGER_FROM_BYTES / 8 * 4;
+        let arrays: Vec<Vec<f64>> = (0..4).map(|k| vec![k as f64; n]).collect();
+        let mut offsets: Vec<usize> = arrays.iter().map(|a| a.as_ptr() as usize % 4096).collect();
+        offsets.sort_unstable();
+        offsets.dedup();
+        assert_eq!(offsets.len(), 4, "{offsets:?}");
+        let mut grown = arrays[3].clone();
+        grown.extend(std::iter::repeat_n(7.0, 3 * n));
+        assert!(grown[..n].iter().all(|&v| v == 3.0) && grown[n..].iter().all(|&v| v == 7.0));
+        grown.truncate(10);
+        grown.shrink_to_fit();
+        assert_eq!(grown, vec![3.0; 10]);
+        let mut small = vec![1u8; 100];
+        small.resize(STAGGER_FROM_BYTES * 2, 2);
+        assert!(small[..100].iter().all(|&v| v == 1) && small[100..].iter().all(|&v| v == 2));
+    }
 
     /// The advised range is whole huge pages inside the allocation, and nothing when the
     /// allocation holds no whole page.
