@@ -1267,7 +1267,7 @@ mod tests {
                 seed: 5,
                 ..GasSpec::unit(n_particles, 0.3)
             }),
-            method: MethodSpec::stepped(0.05, 200, Broadphase::Grid),
+            method: MethodSpec::stepped(0.05, 400, Broadphase::Grid),
             slowdown: InjectedSlowdown::NONE,
         }
     }

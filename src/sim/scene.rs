@@ -398,12 +398,12 @@ mod tests {
             (
                 "walls, fixed r, packing 0.05",
                 GasSpec::unit(1000, 0.05),
-                "95428793d2095343",
+                "c9a3354c42781c11",
             ),
             (
                 "walls, fixed r, packing 0.3",
                 GasSpec::unit(20_000, 0.3),
-                "9f1221c4e79ed20b",
+                "68f8364636de6699",
             ),
             (
                 "periodic, fixed r, packing 0.3",
@@ -412,7 +412,7 @@ mod tests {
                     seed: 7,
                     ..GasSpec::unit(10_000, 0.3)
                 },
-                "2b02c7182330366a",
+                "00ca4132bff95f3c",
             ),
             (
                 "walls, fixed r, packing 0.5 (near jamming)",
@@ -438,7 +438,7 @@ mod tests {
                     seed: 11,
                     ..GasSpec::unit(5000, 0.3)
                 },
-                "7b2d74e64ee55fd1",
+                "6da083186345af75",
             ),
             (
                 "periodic, uniform r, packing 0.05",
@@ -448,7 +448,7 @@ mod tests {
                     seed: 5,
                     ..GasSpec::unit(5000, 0.05)
                 },
-                "d8609e82496b777f",
+                "2c761050b04eefc7",
             ),
             (
                 "periodic, fewer cells than the 3x3 block",
