@@ -21,7 +21,7 @@ use std::ops::{ControlFlow, Range};
 use std::time::Instant;
 
 use crate::backend::comm::{Communicator, Counting, RankTraffic, Traffic};
-use crate::backend::setup::{self, RankStart, cut_slabs, owners};
+use crate::backend::setup::{self, cut_slabs, owners};
 use crate::backend::shared::{Neighbourhood, Seen, SharedChains, pack_shared_disk};
 use crate::backend::{
     Accuracy, BackendError, Balance, CpuScope, Measured, RunOutcome, StageSeconds, Workers,
@@ -53,23 +53,16 @@ pub fn run<C: Communicator>(
 ) -> Result<Option<RunOutcome>, BackendError> {
     let setup_start = Instant::now();
     let comm = &Counting::new(comm);
-    let RankStart {
-        prepared,
-        own,
-        whole,
-        skin,
-        layout,
-        slabs,
-        most_held,
-    } = setup::start(comm, spec)?;
+    let start = setup::start(comm, spec)?;
+    let (prepared, most_held) = (start.prepared, start.most_held);
     let initial = prepared.initial.observables;
     let mut rank = RankState::new(
         &prepared.scene,
-        own,
-        whole.state.disks as usize,
-        layout,
-        &slabs,
-        skin,
+        start.own,
+        start.whole.state.disks as usize,
+        start.layout,
+        &start.slabs,
+        start.skin,
         comm.rank(),
     );
     rank.build_lists(comm);

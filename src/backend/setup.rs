@@ -36,7 +36,7 @@ pub struct RankStart {
 
 /// Builds the initial disks on the ranks together (all ranks call this together).
 pub fn start<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<RankStart, BackendError> {
-    let (mut prepared, placed, whole) = match &spec.scene {
+    let (prepared, placed, whole) = match &spec.scene {
         SceneSource::Gas(gas) if spec.may_prepare_in_parts() => {
             let (scene, placed) = place_own(comm, gas)?;
             let whole = merged_sums(comm, &placed, scene.physics.gravity);
@@ -72,7 +72,6 @@ pub fn start<C: Communicator>(comm: &C, spec: &RunSpec) -> Result<RankStart, Bac
     let most_placed = placed.len();
     let own = to_slabs(comm, placed, &layout, &slabs);
     let most_held = most_placed.max(own.len());
-    prepared.scene.particles = Particles::default();
     Ok(RankStart {
         prepared,
         own,
