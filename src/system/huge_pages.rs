@@ -51,10 +51,10 @@ fn is_staggered(layout: Layout) -> bool {
 }
 
 /// What a staggered allocation of `layout` takes from the system: room for the largest
-/// offset in front.
-fn padded(layout: Layout) -> Layout {
+/// offset in front (`None` past the largest size an allocation may have).
+fn padded(layout: Layout) -> Option<Layout> {
     let front = STAGGER_ALIGN + (STAGGERS - 1) * STAGGER_STEP;
-    Layout::from_size_align(layout.size() + front, STAGGER_ALIGN).expect("a valid layout")
+    Layout::from_size_align(layout.size().checked_add(front)?, STAGGER_ALIGN).ok()
 }
 
 /// A staggered allocation in `base` (null passes through): the address at the turn's
@@ -89,23 +89,24 @@ unsafe fn unstaggered(ptr: *mut u8) -> *mut u8 {
 unsafe impl GlobalAlloc for HugePageAllocator {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         // SAFETY: the caller's contract, passed on.
-        match is_staggered(layout) {
-            true => staggered(advised(
-                unsafe { System.alloc(padded(layout)) },
-                layout.size(),
-            )),
-            false => advised(unsafe { System.alloc(layout) }, layout.size()),
+        match (is_staggered(layout), padded(layout)) {
+            (true, Some(padded)) => {
+                staggered(advised(unsafe { System.alloc(padded) }, layout.size()))
+            }
+            (true, None) => std::ptr::null_mut(),
+            (false, _) => advised(unsafe { System.alloc(layout) }, layout.size()),
         }
     }
 
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
         // SAFETY: the caller's contract, passed on.
-        match is_staggered(layout) {
-            true => staggered(advised(
-                unsafe { System.alloc_zeroed(padded(layout)) },
+        match (is_staggered(layout), padded(layout)) {
+            (true, Some(padded)) => staggered(advised(
+                unsafe { System.alloc_zeroed(padded) },
                 layout.size(),
             )),
-            false => advised(unsafe { System.alloc_zeroed(layout) }, layout.size()),
+            (true, None) => std::ptr::null_mut(),
+            (false, _) => advised(unsafe { System.alloc_zeroed(layout) }, layout.size()),
         }
     }
 
@@ -130,9 +131,9 @@ unsafe impl GlobalAlloc for HugePageAllocator {
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         // SAFETY: the caller's contract, passed on; a staggered allocation is freed from
         // its start, with the layout it was made with.
-        match is_staggered(layout) {
-            true => unsafe { System.dealloc(unstaggered(ptr), padded(layout)) },
-            false => unsafe { System.dealloc(ptr, layout) },
+        match (is_staggered(layout), padded(layout)) {
+            (true, Some(padded)) => unsafe { System.dealloc(unstaggered(ptr), padded) },
+            _ => unsafe { System.dealloc(ptr, layout) },
         }
     }
 }
