@@ -175,13 +175,13 @@ impl ThreadedStepper {
         particles: &Particles,
         n_bands: usize,
     ) -> Self {
-        let skin = Skin::for_scene(&domain, particles, params.dt);
+        let (skin, grid) = Skin::with_grid(&domain, particles, params.dt);
         ThreadedStepper {
             domain,
             physics,
             params,
             n_bands,
-            grid: StripGrid::with_skin(&domain, particles, skin.width()),
+            grid,
             skin,
             lists: Vec::new(),
             in_first_strips: DiskSet::default(),

@@ -15,7 +15,7 @@
 
 use std::ops::Range;
 
-use super::grid::{Contact, StripGrid};
+use super::grid::{Contact, StripGrid, StripLayout};
 use super::particles::{DiskFigures, Particles, ReorderScratch};
 use super::pieces::{MIN_STREAMING_PIECE, Pieces, split_at_ranges};
 use super::scene::{Boundary, Domain};
@@ -197,6 +197,15 @@ impl Skin {
             width = width.min(widest);
         }
         Skin::with_width(width.max(0.0))
+    }
+
+    /// The skin ([`Skin::for_figures`]) and the whole box's strip grid for it, built for
+    /// `particles`, from one pass over the disks for their figures.
+    pub fn with_grid(domain: &Domain, particles: &Particles, dt: f64) -> (Skin, StripGrid) {
+        let figures = particles.figures();
+        let skin = Skin::for_figures(domain, &figures, dt);
+        let layout = StripLayout::for_figures(domain, &figures, skin.width());
+        (skin, StripGrid::whole(domain, layout, particles))
     }
 
     /// A skin `width` wide (finite, not negative).

@@ -126,12 +126,12 @@ impl Stepper {
         params: StepParams,
         particles: &Particles,
     ) -> Self {
-        let skin = Skin::for_scene(&domain, particles, params.dt);
+        let (skin, grid) = Skin::with_grid(&domain, particles, params.dt);
         Stepper {
             domain,
             physics,
             params,
-            grid: StripGrid::with_skin(&domain, particles, skin.width()),
+            grid,
             skin,
             neighbours: PairList::default(),
             escapees: Vec::new(),
