@@ -208,7 +208,11 @@ impl StripGrid {
     /// the ranks of the distributed backend; the builds of later steps re-sort by
     /// insertion.
     pub fn with_skin(domain: &Domain, particles: &Particles, skin: f64) -> StripGrid {
-        StripGrid::whole(domain, StripLayout::with_skin(domain, particles, skin), particles)
+        StripGrid::whole(
+            domain,
+            StripLayout::with_skin(domain, particles, skin),
+            particles,
+        )
     }
 
     /// [`StripGrid::with_skin`] with its strips laid out already.
