@@ -556,7 +556,12 @@ fn run_mpi(
             None => FinalState::Summed,
         };
         return Ok(
-            match mpi::run_rank(spec, ranks.map(NonZeroUsize::get), final_state)? {
+            match mpi::run_rank(
+                spec,
+                ranks.map(NonZeroUsize::get),
+                final_state,
+                NonZeroUsize::MIN,
+            )? {
                 Some(outcome) => Finished::Here(outcome),
                 None => Finished::OtherRank,
             },

@@ -85,7 +85,9 @@ fn ranks_as_threads_give_the_serial_observables() {
                 let handles: Vec<_> = ThreadComm::group(ranks)
                     .into_iter()
                     .map(|comm| {
-                        scope.spawn(move || distributed::run(&comm, spec, FinalState::Summed))
+                        scope.spawn(move || {
+                            distributed::run(&comm, spec, FinalState::Summed, NonZeroUsize::MIN)
+                        })
                     })
                     .collect();
                 let mut outcomes = handles.into_iter().map(|h| h.join().unwrap().unwrap());

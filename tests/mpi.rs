@@ -62,7 +62,15 @@ fn mpi_ranks_count_what_they_send_as_ranks_run_as_threads_do() {
             let handles: Vec<_> = ThreadComm::group(ranks)
                 .into_iter()
                 .map(|comm| {
-                    scope.spawn(move || distributed::run(&comm, spec, FinalState::Summed).unwrap())
+                    scope.spawn(move || {
+                        distributed::run(
+                            &comm,
+                            spec,
+                            FinalState::Summed,
+                            std::num::NonZeroUsize::MIN,
+                        )
+                        .unwrap()
+                    })
                 })
                 .collect();
             handles.into_iter().map(|h| h.join().unwrap()).collect()

@@ -17,6 +17,7 @@
 //! chain sees its contacts in the serial order, which is why the bits agree.
 
 use std::collections::{HashMap, HashSet};
+use std::num::NonZeroUsize;
 use std::ops::{ControlFlow, Range};
 use std::time::Instant;
 
@@ -43,13 +44,14 @@ use crate::sim::step::{ReorderSchedule, advance_disks};
 use crate::sim::{Boundary, Particles, StepCounters};
 use crate::system::machine::LoopSeconds;
 
-/// Runs `spec` on every rank of `comm` (all ranks call this together). Rank 0 returns
-/// the summary, and the whole final state when `final_state` asks for it; the other
-/// ranks return `None`.
+/// Runs `spec` on every rank of `comm` (all ranks call this together), each rank
+/// stepping its slab on a pool of `threads` threads. Rank 0 returns the summary, and the
+/// whole final state when `final_state` asks for it; the other ranks return `None`.
 pub fn run<C: Communicator>(
     comm: &C,
     spec: &RunSpec,
     final_state: FinalState,
+    threads: NonZeroUsize,
 ) -> Result<Option<RunOutcome>, BackendError> {
     let setup_start = Instant::now();
     let comm = &Counting::new(comm);
@@ -118,7 +120,7 @@ pub fn run<C: Communicator>(
     });
     let workers = Workers {
         backend: BackendKind::Mpi,
-        threads: 1,
+        threads: threads.get(),
         ranks: comm.size(),
     };
     Ok(Some(RunOutcome {
@@ -1118,7 +1120,9 @@ mod tests {
         let outcomes: Vec<Option<RunOutcome>> = std::thread::scope(|scope| {
             let handles: Vec<_> = ThreadComm::group(ranks)
                 .into_iter()
-                .map(|comm| scope.spawn(move || run(&comm, spec, final_state).unwrap()))
+                .map(|comm| {
+                    scope.spawn(move || run(&comm, spec, final_state, NonZeroUsize::MIN).unwrap())
+                })
                 .collect();
             handles.into_iter().map(|h| h.join().unwrap()).collect()
         });

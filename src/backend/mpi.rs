@@ -2,6 +2,8 @@
 //! one rank's run when collide was started by `mpirun`, and the ping-pong of `collide
 //! calibrate --network` (its fit is `cluster::network`'s).
 
+use std::num::NonZeroUsize;
+
 use mpi::Count;
 use mpi::collective::SystemOperation;
 use mpi::datatype::{Partition, PartitionMut};
@@ -22,21 +24,25 @@ pub fn launched_by_mpi() -> bool {
         .any(|name| std::env::var_os(name).is_some())
 }
 
-/// Runs `spec` as one rank of the MPI world. `ranks`, when given, must be the world
-/// size. Returns the outcome on rank 0 (with the whole final state if `final_state`
-/// asks for it) and `None` on the others.
+/// Runs `spec` as one rank of the MPI world, stepping on `threads` threads. `ranks`,
+/// when given, must be the world size. Returns the outcome on rank 0 (with the whole
+/// final state if `final_state` asks for it) and `None` on the others.
 pub fn run_rank(
     spec: &RunSpec,
     ranks: Option<usize>,
     final_state: FinalState,
+    threads: NonZeroUsize,
 ) -> Result<Option<RunOutcome>, BackendError> {
     let universe = mpi::initialize()
         .ok_or_else(|| BackendError::Mpi("MPI was already initialised in this process".into()))?;
     let comm = MpiComm {
         world: universe.world(),
     };
-    // Each rank steps on one thread; where it may run goes to the launching process.
-    eprintln!("{}", crate::cluster::placement::rank_line(comm.rank(), 1));
+    // Where the rank may run goes to the launching process.
+    eprintln!(
+        "{}",
+        crate::cluster::placement::rank_line(comm.rank(), threads.get())
+    );
     if let Some(asked) = ranks
         && asked != comm.size()
     {
@@ -45,7 +51,7 @@ pub fn run_rank(
             comm.size()
         )));
     }
-    distributed::run(&comm, spec, final_state)
+    distributed::run(&comm, spec, final_state, threads)
 }
 
 /// Timed blocks of each size; a size's time is their median (robust to the other
