@@ -1525,7 +1525,11 @@ mod tests {
         let errors: Vec<String> = std::thread::scope(|scope| {
             let handles: Vec<_> = ThreadComm::group(layout.n_strips + 1)
                 .into_iter()
-                .map(|comm| scope.spawn(move || run(&comm, spec, FinalState::Summed).err()))
+                .map(|comm| {
+                    scope.spawn(move || {
+                        run(&comm, spec, FinalState::Summed, NonZeroUsize::MIN).err()
+                    })
+                })
                 .collect();
             (handles.into_iter())
                 .map(|handle| handle.join().unwrap().expect("refused").to_string())
