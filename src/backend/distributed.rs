@@ -21,26 +21,30 @@ use std::num::NonZeroUsize;
 use std::ops::{ControlFlow, Range};
 use std::time::Instant;
 
+use crate::backend::bands::{
+    BandLists, ESCAPEES_PER_PIECE, advance_in_pieces, largest_displacement_sq,
+};
 use crate::backend::comm::{Communicator, Counting, RankTraffic, Traffic};
 use crate::backend::setup::{self, cut_slabs, owners};
 use crate::backend::shared::{Neighbourhood, Seen, SharedChains, pack_shared_disk};
+use crate::backend::team::with_team_beside;
 use crate::backend::{
     Accuracy, BackendError, Balance, CpuScope, Measured, RunOutcome, StageSeconds, Workers,
     step_loop, summarize, timed,
 };
 use crate::run::backend_kind::BackendKind;
-use crate::run::spec::RunSpec;
+use crate::run::spec::{InjectedSlowdown, RunSpec};
 use crate::sim::exact_sum::{EXACT_SUM_WORDS, ExactSum};
 use crate::sim::grid::{
     Contact, Mover, StripGrid, StripLayout, receive_band, refresh_band, sort_movers,
 };
-use crate::sim::neighbours::{PairList, Skin, with_reorder_scratch};
+use crate::sim::neighbours::{Skin, with_reorder_scratch};
 use crate::sim::observe::{Block, Observables, SeriesRecorder, StateSums, block_end, kinetic_of};
 use crate::sim::particles::{PACKED_LEN, SPARE_SHARE};
-use crate::sim::pieces::InTurn;
+use crate::sim::pieces::{InTurn, Pieces};
 use crate::sim::resolve::resolve_contacts;
 use crate::sim::schedule::{ContactSchedule, DiskSet};
-use crate::sim::step::{ReorderSchedule, advance_disks};
+use crate::sim::step::ReorderSchedule;
 use crate::sim::{Boundary, Particles, StepCounters};
 use crate::system::machine::LoopSeconds;
 
@@ -66,26 +70,27 @@ pub fn run<C: Communicator>(
         &start.slabs,
         start.skin,
         comm.rank(),
+        threads.get(),
     );
-    rank.build_lists(comm);
-    // The ranks start their clocks together: a rank whose set-up ended first would
-    // otherwise count its wait for the slowest one (as much as a fifth of the stepping
-    // time at 10⁶ disks) as stepping and communication. The wait is set-up.
-    comm.barrier();
-    let setup_s = setup_start.elapsed().as_secs_f64();
-
-    // What the stepping loop sends: set-up and the reductions below are not counted,
-    // as they are not timed.
-    let sent_before = comm.traffic();
-    let (steps, dt) = (prepared.steps, prepared.params.dt);
     let mut series = RankSeries::new(&prepared.scene.physics, initial.kinetic_energy);
-    let seconds = step_loop(steps, spec.slowdown, CpuScope::Thread, |step| {
-        rank.step(comm, dt);
-        if let Some(time) = block_end(step, steps, dt) {
-            series.close_block(time, &rank, comm.rank() == 0);
+    let stepping = Stepping {
+        comm,
+        steps: prepared.steps,
+        dt: prepared.params.dt,
+        slowdown: spec.slowdown,
+        setup_start,
+    };
+    // The rank's own thread leads its team: MPI is only ever called from it.
+    let (setup_s, seconds, sent_before) = match threads.get() {
+        1 => stepping.run(&mut rank, &mut series, &InTurn, CpuScope::Thread),
+        _ => {
+            let others = NonZeroUsize::new(threads.get() - 1).expect("two threads or more");
+            let members = super::threads::pool(others)?;
+            with_team_beside(&members, |team| {
+                stepping.run(&mut rank, &mut series, team, CpuScope::Process)
+            })
         }
-        ControlFlow::Continue(())
-    });
+    };
     let sent = comm.traffic().since(&sent_before);
     let series_parts = series.gather_on_first(comm);
 
@@ -133,6 +138,48 @@ pub fn run<C: Communicator>(
             whole
         }),
     }))
+}
+
+/// What every rank's stepping loop needs besides its own state.
+struct Stepping<'a, C> {
+    comm: &'a Counting<'a, C>,
+    steps: u64,
+    dt: f64,
+    slowdown: InjectedSlowdown,
+    setup_start: Instant,
+}
+
+impl<C: Communicator> Stepping<'_, C> {
+    /// Builds the rank's lists, then steps it, its pieces of work over `pieces`, and
+    /// notes its blocks of the series. Returns the set-up's seconds, the loop's, and
+    /// what the rank had sent before the loop.
+    fn run(
+        &self,
+        rank: &mut RankState,
+        series: &mut RankSeries,
+        pieces: &impl Pieces,
+        scope: CpuScope,
+    ) -> (f64, LoopSeconds, Traffic) {
+        let comm = self.comm;
+        rank.build_lists(comm, pieces);
+        // The ranks start their clocks together: a rank whose set-up ended first would
+        // otherwise count its wait for the slowest one (as much as a fifth of the
+        // stepping time at 10⁶ disks) as stepping and communication. The wait is set-up.
+        comm.barrier();
+        let setup_s = self.setup_start.elapsed().as_secs_f64();
+        // What the stepping loop sends: set-up and the reductions after it are not
+        // counted, as they are not timed.
+        let sent_before = comm.traffic();
+        let (steps, dt) = (self.steps, self.dt);
+        let seconds = step_loop(steps, self.slowdown, scope, |step| {
+            rank.step(comm, dt, pieces);
+            if let Some(time) = block_end(step, steps, dt) {
+                series.close_block(time, rank, comm.rank() == 0);
+            }
+            ControlFlow::Continue(())
+        });
+        (setup_s, seconds, sent_before)
+    }
 }
 
 /// A rank's share of the run's block series: at each block's end its running counters
@@ -378,8 +425,13 @@ struct RankState {
     grid: StripGrid,
     /// The skin and the own disks' positions at the last build of the list.
     skin: Skin,
-    /// The pairs the slab's strips found (own disks, then ghosts) at the last build.
-    list: PairList,
+    /// The bands of strips the slab's threads step side by side: one per thread.
+    n_bands: usize,
+    /// One neighbour list per band (own disks, then ghosts, at the last build), and
+    /// each band's own chains of a step.
+    bands: BandLists,
+    /// Per disk: in a pair an escapee's query found this step (all false between steps).
+    touched: Vec<bool>,
     /// The own disks in the slab's first strip at the last build, when a rank below
     /// sees them as its ghosts.
     exported: DiskSet,
@@ -396,7 +448,10 @@ struct RankState {
     /// When the own disks are next stored in grid order: the scene's schedule.
     reorder: ReorderSchedule,
     movers: Vec<Mover>,
-    contacts: Vec<Contact>,
+    /// The pairs the bands handed over and those of the escapees; after the split, the
+    /// rank's own chains among them, in resolution order.
+    crossing: Vec<Contact>,
+    /// The pairs of the chains another rank may hold too.
     shared: Vec<Contact>,
     schedule: ContactSchedule,
     /// What this rank's own steps did.
@@ -486,7 +541,8 @@ impl RankState {
     }
 
     /// Rank `me`'s state, from its disks (`particles`, all in its slab) of a scene of
-    /// `n_disks`.
+    /// `n_disks`, for a slab stepped in `n_bands` bands.
+    #[allow(clippy::too_many_arguments)]
     fn new(
         scene: &crate::sim::Scene,
         particles: Particles,
@@ -495,6 +551,7 @@ impl RankState {
         slabs: &[Range<usize>],
         skin: Skin,
         me: usize,
+        n_bands: usize,
     ) -> RankState {
         let SlabPart {
             slab,
@@ -515,10 +572,12 @@ impl RankState {
             particles,
             grid,
             skin,
-            list: PairList::default(),
+            n_bands,
+            bands: BandLists::default(),
+            touched: Vec::new(),
             reorder: ReorderSchedule::for_scene(n_disks),
             movers: Vec::new(),
-            contacts: Vec::new(),
+            crossing: Vec::new(),
             shared: Vec::new(),
             exported: DiskSet::default(),
             escapees: Vec::new(),
@@ -538,16 +597,17 @@ impl RankState {
         }
     }
 
-    fn step<C: Communicator>(&mut self, comm: &C, dt: f64) {
+    fn step<C: Communicator>(&mut self, comm: &C, dt: f64, pieces: &impl Pieces) {
         let mut stages = self.stages;
         timed(&mut stages.integration, || {
-            let n_particles = self.particles.len();
-            let walls = advance_disks(
-                &self.domain,
-                &self.physics,
+            let (domain, physics) = (&self.domain, &self.physics);
+            let walls = advance_in_pieces(
+                domain,
+                physics,
                 dt,
-                self.particles.disk_slices_mut(),
-                self.skin.tracking(n_particles),
+                &mut self.particles,
+                &mut self.skin,
+                pieces,
             );
             self.counters.merge(&walls);
         });
@@ -556,7 +616,7 @@ impl RankState {
         // ghosts are the same disks in the same order, and the disks that escaped the
         // lists are served by queries, on every peer whose strips they may reach. When
         // the lists are rebuilt does not change the contacts found, so neither the bits.
-        let mine = timed(&mut stages.broad_phase, || self.escapee_report());
+        let mine = timed(&mut stages.broad_phase, || self.escapee_report(pieces));
         let all = timed(&mut stages.communication, || {
             EscapeeSummary::of_largest(&comm.max_all(&mine.values()))
         });
@@ -567,9 +627,9 @@ impl RankState {
         self.busiest_share_sum += busiest_share;
         self.steps += 1;
         if rebuild {
-            self.redistribute(comm, &mut stages, all.moved_sq);
+            self.redistribute(comm, &mut stages, all.moved_sq, pieces);
             if busiest_share > REBALANCE_ABOVE.max(self.cut_share + REBALANCE_GAIN) {
-                timed(&mut stages.communication, || self.rebalance(comm));
+                timed(&mut stages.communication, || self.rebalance(comm, pieces));
             }
         }
         let reported = match (stale && !rebuild, all.reported) {
@@ -584,9 +644,11 @@ impl RankState {
             let escapees = reported
                 .as_deref()
                 .map(|reports| (reports, all.moved_sq.sqrt()));
-            self.find_contacts(ghosts, rebuild, escapees)
+            self.find_contacts(ghosts, rebuild, escapees, pieces)
         });
-        timed(&mut stages.collisions, || self.resolve_own_chains(dt));
+        timed(&mut stages.collisions, || {
+            self.resolve_own_chains(dt, pieces)
+        });
         self.share_chains(comm, &mut stages, dt);
         self.stages = stages;
     }
@@ -733,6 +795,7 @@ impl RankState {
         comm: &C,
         stages: &mut StageSeconds,
         moved_sq: f64,
+        pieces: &impl Pieces,
     ) {
         let emigrants = timed(&mut stages.broad_phase, || self.refresh(comm.size()));
         let to_peers = moved_sq.sqrt() < self.layout.height() / self.layout.n_strips as f64;
@@ -746,8 +809,8 @@ impl RankState {
             false => comm.exchange(&emigrants),
         });
         timed(&mut stages.broad_phase, || {
-            self.migrate(&immigrants);
-            self.skin.record(&self.particles, &InTurn);
+            self.migrate(&immigrants, pieces);
+            self.skin.record(&self.particles, pieces);
             self.mark_exported();
         });
     }
@@ -757,7 +820,7 @@ impl RankState {
     /// (an all-gather of a few numbers per strip), cuts as at set-up, and sends the
     /// disks of strips that changed owner to their new ranks (an all-to-all). Where the
     /// disks are held never changes the bits.
-    fn rebalance<C: Communicator>(&mut self, comm: &C) {
+    fn rebalance<C: Communicator>(&mut self, comm: &C, pieces: &impl Pieces) {
         self.recuts += 1;
         let me = comm.rank();
         let counts: Vec<f64> = (self.slab.clone())
@@ -813,19 +876,19 @@ impl RankState {
         // disks the rank below sees noted.
         let none_left = self.refresh(comm.size());
         debug_assert!(none_left.iter().all(Vec::is_empty));
-        self.migrate(&[]);
-        self.skin.record(&self.particles, &InTurn);
+        self.migrate(&[], pieces);
+        self.skin.record(&self.particles, pieces);
         self.mark_exported();
     }
 
     /// Builds the lists at the disks' present positions, on every rank together, as the
     /// first step would (the serial `Stepper::build_lists`): a run's set-up, untimed.
-    fn build_lists<C: Communicator>(&mut self, comm: &C) {
+    fn build_lists<C: Communicator>(&mut self, comm: &C, pieces: &impl Pieces) {
         let mut untimed = StageSeconds::default();
         // Every disk starts in its rank's slab.
-        self.redistribute(comm, &mut untimed, 0.0);
+        self.redistribute(comm, &mut untimed, 0.0, pieces);
         let ghosts = self.swap_halo(comm);
-        self.take_ghosts(ghosts, true);
+        self.take_ghosts(ghosts, true, pieces);
         // The first step brings the ghosts again, in the same order.
         self.particles.truncate(self.n_own);
     }
@@ -833,11 +896,10 @@ impl RankState {
     /// What the other ranks need to know of this rank's disks that escaped the list;
     /// notes the own escapees in `escapees`, and packs in `reported` those whose queries
     /// may read another rank's strips (marked in `sent`).
-    fn escapee_report(&mut self) -> EscapeeSummary {
+    fn escapee_report(&mut self, pieces: &impl Pieces) -> EscapeeSummary {
         let n_own = self.particles.len();
-        let moved_sq = self
-            .skin
-            .largest_displacement_sq(&self.particles, &self.domain, &InTurn);
+        let moved_sq =
+            largest_displacement_sq(&mut self.skin, &self.particles, &self.domain, pieces);
         self.escapees.clear();
         self.sent.clear(n_own);
         self.reported.clear();
@@ -897,7 +959,7 @@ impl RankState {
 
     /// Frees the slots of the disks that left and takes in the disks that arrived; when
     /// the [`ReorderSchedule`] says so, re-stores the disks in grid order.
-    fn migrate(&mut self, immigrants: &[Vec<f64>]) {
+    fn migrate(&mut self, immigrants: &[Vec<f64>], pieces: &impl Pieces) {
         let staying = self.slab.clone();
         let mut leaving: Vec<u32> = self
             .movers
@@ -927,11 +989,11 @@ impl RankState {
         receive_band(self.grid.owned_strips_mut(), self.slab.start, &[&arrived]);
 
         if self.reorder.count_build() {
-            // The list is rebuilt next: it lends its memory, as the serial stepper's does.
+            // The lists are rebuilt next: they lend their memory, as the serial stepper's
+            // does.
             let (grid, particles) = (&mut self.grid, &mut self.particles);
-            let lists = std::slice::from_mut(&mut self.list);
-            with_reorder_scratch(lists, particles.len(), |scratch| {
-                grid.store_in_grid_order(particles, scratch, &InTurn);
+            with_reorder_scratch(self.bands.lists_mut(), particles.len(), |scratch| {
+                grid.store_in_grid_order(particles, scratch, pieces);
             });
         }
     }
@@ -970,9 +1032,9 @@ impl RankState {
         comm.send_receive(&sends, &from).pop().unwrap_or_default()
     }
 
-    /// Appends the ghosts after the own disks and, with `rebuild`, rebuilds the list
-    /// with them.
-    fn take_ghosts(&mut self, ghosts: Vec<f64>, rebuild: bool) {
+    /// Appends the ghosts after the own disks and, with `rebuild`, rebuilds the bands'
+    /// lists with them.
+    fn take_ghosts(&mut self, ghosts: Vec<f64>, rebuild: bool, pieces: &impl Pieces) {
         let n_own = self.particles.len();
         self.n_own = n_own;
         if rebuild {
@@ -987,58 +1049,74 @@ impl RankState {
                 self.grid
                     .set_ghosts(&self.particles, n_own..self.particles.len());
             }
-            let strips = self.grid.owned();
-            self.list.rebuild(
-                &self.grid,
-                strips,
-                &self.particles,
-                &self.domain,
-                &self.skin,
-            );
+            let bands = self.grid.bands(self.n_bands);
+            let (grid, particles, domain, skin) =
+                (&self.grid, &self.particles, &self.domain, &self.skin);
+            (self.bands).rebuild(grid, &bands, particles, domain, skin, pieces);
         }
     }
 
     /// [`RankState::take_ghosts`], then finds the listed pairs that overlap and, with
     /// `escapees` (the peers' reported escapees and a bound on how far any disk moved),
     /// the pairs of the escapees that involve an own disk, and splits them into chains
-    /// of the rank's own and chains to share.
+    /// of the rank's own (each band's, and the crossing ones) and chains to share.
     fn find_contacts(
         &mut self,
         ghosts: Vec<f64>,
         rebuild: bool,
         escapees: Option<(&[Vec<f64>], f64)>,
+        pieces: &impl Pieces,
     ) {
-        self.take_ghosts(ghosts, rebuild);
+        self.take_ghosts(ghosts, rebuild, pieces);
         self.first_reported = self.particles.len();
         self.reported_from.clear();
-        let n_own = self.n_own;
-        self.contacts.clear();
-        self.list
-            .find_contacts(&self.particles, &self.domain, &mut self.contacts);
-        if let Some((reports, moved)) = escapees {
-            self.find_contacts_of_escapees(reports, moved);
+        let escaped = match escapees {
+            Some((reports, moved)) => self.find_contacts_of_escapees(reports, moved, pieces),
+            None => Vec::new(),
+        };
+        self.touched.resize(self.particles.len(), false);
+        for contact in &escaped {
+            self.touched[contact.a as usize] = true;
+            self.touched[contact.b as usize] = true;
         }
+        let n_own = self.n_own;
         let (particles, exported, sent) = (&self.particles, &self.exported, &self.sent);
         // Ghosts, the other ranks' escapees, exported disks (those of the first strip at
         // the build) and escapees sent to other ranks are seen by another rank too:
         // their chains are shared.
         let seen_elsewhere =
             |disk: u32| disk as usize >= n_own || exported.contains(disk) || sent.contains(disk);
+        // A disk in an escapee's pair may be in a band's pairs too: the band hands its
+        // chain over, to be put together with the escapee's.
+        let touched = &self.touched;
+        let pinned = |disk: u32| touched[disk as usize] || seen_elsewhere(disk);
+        self.crossing.clear();
+        (self.bands).find_contacts(particles, &self.domain, pinned, &mut self.crossing, pieces);
+        self.crossing.extend_from_slice(&escaped);
+        for contact in &escaped {
+            self.touched[contact.a as usize] = false;
+            self.touched[contact.b as usize] = false;
+        }
         self.shared.clear();
         self.schedule.split(
             &particles.id,
-            &mut self.contacts,
+            &mut self.crossing,
             &mut self.shared,
             seen_elsewhere,
         );
     }
 
-    /// Appends the peers' reported escapees after the ghosts, and adds to the contacts
-    /// the pairs that queries around every escapee (own and reported) find in this
-    /// rank's grid and that hold an own disk (the others are another rank's to find). A
-    /// reported escapee may be a ghost here too: the same disk under two storage
-    /// indices, never paired with itself.
-    fn find_contacts_of_escapees(&mut self, reports: &[Vec<f64>], moved: f64) {
+    /// Appends the peers' reported escapees after the ghosts, and returns the pairs
+    /// that queries around every escapee (own and reported) find in this rank's grid and
+    /// that hold an own disk (the others are another rank's to find). A reported
+    /// escapee may be a ghost here too: the same disk under two storage indices, never
+    /// paired with itself.
+    fn find_contacts_of_escapees(
+        &mut self,
+        reports: &[Vec<f64>],
+        moved: f64,
+        pieces: &impl Pieces,
+    ) -> Vec<Contact> {
         let first_reported = self.particles.len();
         self.make_room(reports.iter().map(Vec::as_slice));
         for (report, &from) in reports.iter().zip(self.hood.peers()) {
@@ -1049,14 +1127,19 @@ impl RankState {
         }
         let mut queried = self.escapees.clone();
         queried.extend(first_reported as u32..self.particles.len() as u32);
-        let mut found = Vec::new();
-        self.grid
-            .find_contacts_of(&queried, moved, &self.particles, &self.domain, &mut found);
+        let (grid, particles, domain) = (&self.grid, &self.particles, &self.domain);
+        let found = pieces.map(queried.chunks(ESCAPEES_PER_PIECE), |movers| {
+            let mut contacts = Vec::new();
+            grid.find_contacts_of(movers, moved, particles, domain, &mut contacts);
+            contacts
+        });
         let (n_own, id) = (self.n_own, &self.particles.id);
-        self.contacts.extend(found.into_iter().filter(|contact| {
-            let (a, b) = (contact.a as usize, contact.b as usize);
-            (a < n_own || b < n_own) && id[a] != id[b]
-        }));
+        (found.into_iter().flatten())
+            .filter(|contact| {
+                let (a, b) = (contact.a as usize, contact.b as usize);
+                (a < n_own || b < n_own) && id[a] != id[b]
+            })
+            .collect()
     }
 
     /// Makes room, when there is too little, for the disks packed in `incoming` and a
@@ -1075,14 +1158,19 @@ impl RankState {
         }
     }
 
-    fn resolve_own_chains(&mut self, dt: f64) {
+    /// Resolves the rank's own chains: each band's, the bands at once, then the
+    /// crossing ones (they share no disk).
+    fn resolve_own_chains(&mut self, dt: f64, pieces: &impl Pieces) {
+        let (domain, physics) = (&self.domain, &self.physics);
+        let counters = &mut self.counters;
+        (self.bands).resolve(&mut self.particles, domain, physics, dt, counters, pieces);
         resolve_contacts(
             &mut self.particles,
-            &self.domain,
-            &self.physics,
+            domain,
+            physics,
             dt,
-            &self.contacts,
-            &mut self.counters,
+            &self.crossing,
+            counters,
             |_| {},
         );
     }
@@ -1113,16 +1201,21 @@ mod tests {
     }
 
     fn run_on_threads(spec: &RunSpec, ranks: usize) -> RunOutcome {
-        run_on_threads_with(spec, ranks, FinalState::Summed)
+        run_on_threads_with(spec, ranks, 1, FinalState::Summed)
     }
 
-    fn run_on_threads_with(spec: &RunSpec, ranks: usize, final_state: FinalState) -> RunOutcome {
+    /// `ranks` ranks as threads, each stepping on a team of `threads` threads.
+    fn run_on_threads_with(
+        spec: &RunSpec,
+        ranks: usize,
+        threads: usize,
+        final_state: FinalState,
+    ) -> RunOutcome {
+        let threads = NonZeroUsize::new(threads).unwrap();
         let outcomes: Vec<Option<RunOutcome>> = std::thread::scope(|scope| {
             let handles: Vec<_> = ThreadComm::group(ranks)
                 .into_iter()
-                .map(|comm| {
-                    scope.spawn(move || run(&comm, spec, final_state, NonZeroUsize::MIN).unwrap())
-                })
+                .map(|comm| scope.spawn(move || run(&comm, spec, final_state, threads).unwrap()))
                 .collect();
             handles.into_iter().map(|h| h.join().unwrap()).collect()
         });
@@ -1162,15 +1255,49 @@ mod tests {
         }
     }
 
+    /// Ranks × threads: each rank steps its slab in bands, one per thread, and hands the
+    /// chains that reach a band's first strip to its own crossing chains or, when
+    /// another rank may hold them, to the shared ones. Walls and periodic, elastic and
+    /// inelastic, dilute and dense, unequal disks, and a pile under gravity.
+    #[test]
+    fn ranks_of_several_threads_give_the_serial_hash() {
+        let mut pile = spec(Boundary::Walls, 0.5, 0.3);
+        if let SceneSource::Gas(gas) = &mut pile.scene {
+            gas.physics.gravity = Some([0.0, -1.0]);
+        }
+        pile.method = MethodSpec::stepped(0.05, 600, Broadphase::Grid);
+        let mut cases = vec![("pile", pile)];
+        for boundary in [Boundary::Walls, Boundary::Periodic] {
+            for (restitution, packing) in [(1.0, 0.05), (0.8, 0.35)] {
+                cases.push(("gas", spec(boundary, restitution, packing)));
+            }
+        }
+        for (name, spec) in &cases {
+            let reference = serial::run(spec).unwrap().summary;
+            for (ranks, threads) in [(1, 2), (2, 2), (3, 2), (2, 3)] {
+                let summary = run_on_threads_with(spec, ranks, threads, FinalState::Summed).summary;
+                let case = format!("{name} {:?} {ranks} × {threads}", summary.boundary);
+                assert_eq!(summary.state_hash, reference.state_hash, "{case}");
+                assert_eq!(summary.pair_collisions, reference.pair_collisions, "{case}");
+                assert_eq!(summary.max_overlap, reference.max_overlap, "{case}");
+                assert_eq!(
+                    (summary.ranks, summary.threads, summary.workers),
+                    (ranks, threads, ranks * threads),
+                    "{case}"
+                );
+            }
+        }
+    }
+
     /// Rank 0 holds every disk at the end only when the run is asked for its final
     /// state (`--dump`): then it is the serial run's, disk for disk.
     #[test]
     fn the_final_state_reaches_rank_0_only_when_asked_for() {
         let spec = spec(Boundary::Walls, 0.8, 0.35);
         let reference = serial::run(&spec).unwrap();
-        let summed = run_on_threads_with(&spec, 3, FinalState::Summed);
+        let summed = run_on_threads_with(&spec, 3, 1, FinalState::Summed);
         assert!(summed.final_state.is_none());
-        let gathered = run_on_threads_with(&spec, 3, FinalState::Gathered);
+        let gathered = run_on_threads_with(&spec, 3, 2, FinalState::Gathered);
         let disks = |outcome: &RunOutcome| outcome.final_state.as_ref().unwrap().disks_by_id();
         assert_eq!(disks(&gathered), disks(&reference));
         assert_eq!(gathered.summary.state_hash, summed.summary.state_hash);

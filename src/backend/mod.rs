@@ -3,6 +3,7 @@
 //! The serial backend is the reference; the threaded (rayon) and distributed (MPI)
 //! backends must reproduce its `state_hash` bit for bit.
 
+mod bands;
 pub mod comm;
 pub mod distributed;
 #[cfg(feature = "mpi")]

@@ -58,19 +58,32 @@ pub struct Team<'a> {
 /// phases over. The other workers are held until `work` returns (or panics); one that
 /// is busy elsewhere meanwhile only leaves more of each phase to the others.
 pub fn with_team<R>(work: impl FnOnce(&Team<'_>) -> R) -> R {
-    let n_members = rayon::current_num_threads().saturating_sub(1);
-    let shared = Shared::new(n_members + 1);
-    rayon::in_place_scope(|scope| {
-        for member in 0..n_members {
-            let shared = &shared;
-            // Thread 0 of the team is the leader.
-            scope.spawn(move |_| shared.serve(member + 1));
-        }
-        let team = Team { shared: &shared };
-        // Dismissed however `work` ends: the scope waits for every member to leave.
-        let _dismiss = Dismiss(&shared);
-        work(&team)
-    })
+    let shared = Shared::new(rayon::current_num_threads());
+    rayon::in_place_scope(|scope| lead(scope, &shared, work))
+}
+
+/// Runs `work` on this thread, which need not be a worker of any pool, leading a
+/// [`Team`] of itself and every worker of `members`, as [`with_team`] does. An MPI rank
+/// steps this way: its communication stays on the thread that started MPI.
+pub fn with_team_beside<R>(members: &rayon::ThreadPool, work: impl FnOnce(&Team<'_>) -> R) -> R {
+    let shared = Shared::new(members.current_num_threads() + 1);
+    members.in_place_scope(|scope| lead(scope, &shared, work))
+}
+
+/// Spawns a member into `scope` for every thread of `shared` but the leader (thread
+/// 0, this one), and runs `work` with the team.
+fn lead<'s, R>(
+    scope: &rayon::Scope<'s>,
+    shared: &'s Shared,
+    work: impl FnOnce(&Team<'_>) -> R,
+) -> R {
+    for member in 1..shared.cursors.len() {
+        scope.spawn(move |_| shared.serve(member));
+    }
+    let team = Team { shared };
+    // Dismissed however `work` ends: the scope waits for every member to leave.
+    let _dismiss = Dismiss(shared);
+    work(&team)
 }
 
 impl Team<'_> {

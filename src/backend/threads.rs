@@ -15,6 +15,9 @@ use std::num::NonZeroUsize;
 use std::ops::{ControlFlow, Range};
 use std::time::Instant;
 
+use crate::backend::bands::{
+    BandLists, ESCAPEES_PER_PIECE, advance_in_pieces, largest_displacement_sq,
+};
 use crate::backend::team::{Team, with_team};
 use crate::backend::{
     Accuracy, BackendError, CpuScope, Measured, RunOutcome, StageSeconds, Workers, step_loop,
@@ -23,31 +26,16 @@ use crate::backend::{
 use crate::draw::offscreen::{Offscreen, draw_step};
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
-use crate::sim::collision::DiskState;
 use crate::sim::grid::{
     Contact, Entry, Mover, StripGrid, find_contacts_all_pairs_from, order_canonically,
     receive_band, refresh_band,
 };
-use crate::sim::neighbours::{
-    DISPLACEMENT_BLOCK, Displacements, PairList, Skin, with_reorder_scratch,
-};
+use crate::sim::neighbours::{Skin, with_reorder_scratch};
 use crate::sim::observe::{SeriesRecorder, StateSums, block_end};
-use crate::sim::pieces::{InTurn, MIN_STREAMING_PIECE, Pieces};
-use crate::sim::prefetch::prefetch;
+use crate::sim::pieces::Pieces;
 use crate::sim::resolve::resolve_contacts;
-use crate::sim::schedule::{ContactSchedule, DiskSet};
-use crate::sim::step::{ReorderSchedule, advance_disks};
-use crate::sim::{
-    Broadphase, DiskSlices, Domain, Particles, PerDisk, Physics, StepCounters, StepParams,
-};
-
-/// Scenes from this many disks on measure the largest displacement since the lists'
-/// build in pieces over the team: on one thread it took 0.14–0.16 ns per disk-step at
-/// 10⁶ disks and packing 0.3, in pieces 0.06 (`docs/performance.md`). At 2·10⁴ disks,
-/// runs with the pieces went 0.971–0.978 times as fast as runs without (there the part
-/// takes a few µs a step on one thread; another phase of the team costing as much is
-/// the likely reason, not measured alone).
-const PARALLEL_LARGEST_DISKS: usize = 1 << 16;
+use crate::sim::step::ReorderSchedule;
+use crate::sim::{Broadphase, Domain, Particles, Physics, StepCounters, StepParams};
 
 /// A pool of exactly `threads` threads for one run (never the global pool).
 pub fn pool(threads: NonZeroUsize) -> Result<rayon::ThreadPool, BackendError> {
@@ -143,26 +131,18 @@ pub struct ThreadedStepper {
     /// Strips tall enough for the neighbour lists' skin.
     grid: StripGrid,
     skin: Skin,
-    /// Per band of the last build: the candidate pairs its strips found.
-    lists: Vec<PairList>,
-    /// The disks in the first strip of a band at the last build (with more than one
-    /// band). Only such a disk can be in two bands' lists.
-    in_first_strips: DiskSet,
+    /// One neighbour list per band, and each band's pairs of a step.
+    bands: BandLists,
     /// Per disk: in a pair an escapee's query found this step (all false between steps).
     touched: Vec<bool>,
     reorder: ReorderSchedule,
     /// Per band: disks that left its strips in the last refresh.
     movers: Vec<Vec<Mover>>,
-    /// Per band: the pairs its strips found, then those of chains it resolves alone.
-    contacts: Vec<Vec<Contact>>,
-    /// Per band: the pairs of its chains that reach a band's first strip.
-    handed_over: Vec<Vec<Contact>>,
-    /// Every band's handed-over pairs, in canonical order.
+    /// Every band's handed-over pairs (with the seed's search, every pair), in
+    /// canonical order.
     crossing: Vec<Contact>,
     /// Scratch for putting pairs in canonical order.
     keyed: Vec<(u64, Contact)>,
-    /// Per band: union–find scratch.
-    schedules: Vec<ContactSchedule>,
     pub counters: StepCounters,
     pub stages: StageSeconds,
 }
@@ -183,16 +163,12 @@ impl ThreadedStepper {
             n_bands,
             grid,
             skin,
-            lists: Vec::new(),
-            in_first_strips: DiskSet::default(),
+            bands: BandLists::default(),
             touched: Vec::new(),
             reorder: ReorderSchedule::for_scene(particles.len()),
             movers: Vec::new(),
-            contacts: Vec::new(),
-            handed_over: Vec::new(),
             crossing: Vec::new(),
             keyed: Vec::new(),
-            schedules: Vec::new(),
             counters: StepCounters::default(),
             stages: StageSeconds::default(),
         }
@@ -221,39 +197,8 @@ impl ThreadedStepper {
 
     fn advance(&mut self, particles: &mut Particles, team: &Team<'_>) {
         let (domain, physics, dt) = (&self.domain, &self.physics, self.params.dt);
-        // Whole blocks of the lists' displacement record per chunk.
-        let chunk = team.piece_len(particles.len(), MIN_STREAMING_PIECE, DISPLACEMENT_BLOCK);
-        let n_chunks = particles.len().div_ceil(chunk);
-        let displacements: Vec<Option<Displacements>> = match self.skin.tracking(particles.len()) {
-            Some(record) => record.into_chunks(chunk).map(Some).collect(),
-            None => (0..n_chunks).map(|_| None).collect(),
-        };
-        let DiskSlices {
-            x,
-            y,
-            vx,
-            vy,
-            radius,
-        } = particles.disk_slices_mut();
-        let chunks = x
-            .chunks_mut(chunk)
-            .zip(y.chunks_mut(chunk))
-            .zip(vx.chunks_mut(chunk))
-            .zip(vy.chunks_mut(chunk))
-            .zip(radius.chunks(chunk))
-            .map(|((((x, y), vx), vy), radius)| DiskSlices {
-                x,
-                y,
-                vx,
-                vy,
-                radius,
-            })
-            .zip(displacements);
-        let walls = team.map(chunks, |(disks, displacements)| {
-            advance_disks(domain, physics, dt, disks, displacements)
-        });
-        // Counts and maxima only: the same totals in any order.
-        walls.iter().for_each(|walls| self.counters.merge(walls));
+        let walls = advance_in_pieces(domain, physics, dt, particles, &mut self.skin, team);
+        self.counters.merge(&walls);
     }
 
     fn find_contacts(&mut self, particles: &mut Particles, team: &Team<'_>) {
@@ -261,41 +206,17 @@ impl ThreadedStepper {
         match self.params.broadphase {
             Broadphase::Grid => {
                 let escaped = self.contacts_of_escapees(particles, team);
-                let n_lists = self.lists.len();
-                self.contacts.resize_with(n_lists, Vec::new);
-                self.handed_over.resize_with(n_lists, Vec::new);
-                self.schedules
-                    .resize_with(n_lists, ContactSchedule::default);
-                // A disk in a band's first strip at the build may also be in the list of
-                // the band below (its north strip), or of the last band (periodic wrap).
-                // So may a disk in a contact found by an escapee's query.
-                let (in_first_strips, touched) = (&self.in_first_strips, &self.touched);
-                let pinned = |disk: u32| in_first_strips.contains(disk) || touched[disk as usize];
-                let (domain, particles) = (&self.domain, &*particles);
-                let mut bands: Vec<_> = self
-                    .lists
-                    .iter()
-                    .zip(&mut self.contacts)
-                    .zip(&mut self.handed_over)
-                    .zip(&mut self.schedules)
-                    .collect();
-                team.for_each(
-                    &mut bands,
-                    |(((list, band_contacts), band_handed_over), schedule)| {
-                        // Filled as locals: the lengths of the bands' vectors share cache
-                        // lines, and each push would bounce them between threads.
-                        let mut contacts = std::mem::take(*band_contacts);
-                        let mut handed_over = std::mem::take(*band_handed_over);
-                        contacts.clear();
-                        handed_over.clear();
-                        list.find_contacts(particles, domain, &mut contacts);
-                        // Split while the pairs are in list order, close in memory.
-                        schedule.split(&particles.id, &mut contacts, &mut handed_over, pinned);
-                        **band_contacts = contacts;
-                        **band_handed_over = handed_over;
-                    },
+                // A disk in a contact found by an escapee's query may also be in a
+                // band's pairs: its chain goes to the crossing list too.
+                let touched = &self.touched;
+                let pinned = |disk: u32| touched[disk as usize];
+                (self.bands).find_contacts(
+                    particles,
+                    &self.domain,
+                    pinned,
+                    &mut self.crossing,
+                    team,
                 );
-                self.crossing.extend(self.handed_over.iter().flatten());
                 self.crossing.extend_from_slice(&escaped);
                 // An escapee's pair may also be listed: kept once.
                 order_canonically(&mut self.crossing, &particles.id, &mut self.keyed);
@@ -315,13 +236,7 @@ impl ThreadedStepper {
     fn contacts_of_escapees(&mut self, particles: &mut Particles, team: &Team<'_>) -> Vec<Contact> {
         let n = particles.len();
         self.touched.resize(n, false);
-        let largest_sq = if n >= PARALLEL_LARGEST_DISKS {
-            self.skin
-                .largest_displacement_sq(particles, &self.domain, team)
-        } else {
-            self.skin
-                .largest_displacement_sq(particles, &self.domain, &InTurn)
-        };
+        let largest_sq = largest_displacement_sq(&mut self.skin, particles, &self.domain, team);
         let (skin, domain, now) = (&self.skin, &self.domain, &*particles);
         if !skin.is_exceeded(largest_sq) {
             return Vec::new();
@@ -337,7 +252,7 @@ impl ThreadedStepper {
         }
         let grid = &self.grid;
         let moved = largest_sq.sqrt();
-        let found = team.map(escapees.chunks(256), |movers| {
+        let found = team.map(escapees.chunks(ESCAPEES_PER_PIECE), |movers| {
             let mut contacts = Vec::new();
             grid.find_contacts_of(movers, moved, now, domain, &mut contacts);
             contacts
@@ -354,27 +269,14 @@ impl ThreadedStepper {
     /// the positions they were built at.
     fn rebuild_lists(&mut self, particles: &mut Particles, team: &Team<'_>) {
         let bands = self.build_grid(particles, team);
-        self.in_first_strips.clear(particles.len());
-        for band in bands.iter().filter(|_| bands.len() > 1) {
-            for entry in self.grid.strip_entries(band.start) {
-                self.in_first_strips.insert(entry.idx());
-            }
-        }
-        debug_assert!(
-            (0..particles.len()).all(|disk| {
-                let strip = self.grid.layout().strip_of(particles.y[disk]);
-                let first = bands.len() > 1 && bands.iter().any(|band| band.start == strip);
-                self.in_first_strips.contains(disk as u32) == first
-            }),
-            "the first strips' entries are the disks built there"
+        (self.bands).rebuild(
+            &self.grid,
+            &bands,
+            particles,
+            &self.domain,
+            &self.skin,
+            team,
         );
-        self.lists.resize_with(bands.len(), PairList::default);
-        let (grid, domain, skin, particles_now) =
-            (&self.grid, &self.domain, &self.skin, &*particles);
-        let mut lists: Vec<_> = self.lists.iter_mut().zip(&bands).collect();
-        team.for_each(&mut lists, |(list, band)| {
-            list.rebuild(grid, (*band).clone(), particles_now, domain, skin)
-        });
         self.skin.record(particles, team);
     }
 
@@ -410,7 +312,7 @@ impl ThreadedStepper {
             // The lists are rebuilt next: the re-storing works in their memory, as the
             // serial stepper's does, in pieces over the team.
             let grid = &mut self.grid;
-            with_reorder_scratch(&mut self.lists, particles.len(), |scratch| {
+            with_reorder_scratch(self.bands.lists_mut(), particles.len(), |scratch| {
                 grid.store_in_grid_order(particles, scratch, team);
             });
         }
@@ -432,53 +334,14 @@ impl ThreadedStepper {
             find_contacts_all_pairs_from(cut[0]..cut[1], particles, domain, &mut contacts);
             contacts
         });
-        self.contacts.resize_with(1, Vec::new);
-        self.contacts[0].clear();
-        self.contacts[0].extend(found.into_iter().flatten());
-        order_canonically(&mut self.contacts[0], &particles.id, &mut self.keyed);
+        self.crossing.extend(found.into_iter().flatten());
+        order_canonically(&mut self.crossing, &particles.id, &mut self.keyed);
     }
 
     fn resolve_contacts(&mut self, particles: &mut Particles, team: &Team<'_>) {
         let (domain, physics, dt) = (&self.domain, &self.physics, self.params.dt);
-        let n_lists = self.contacts.len();
-        if n_lists == 1 {
-            // One list and the crossing chains (of escapees) share no disk: either order.
-            resolve_contacts(
-                particles,
-                domain,
-                physics,
-                dt,
-                &self.contacts[0],
-                &mut self.counters,
-                |_| {},
-            );
-        } else {
-            let shared = SharedDisks::new(particles);
-            let band_counters = team.map(&self.contacts[..n_lists], |contacts| {
-                // SAFETY: after `ContactSchedule::split`, a band's list holds only
-                // whole chains with no disk in any band's first strip. A band's pairs
-                // touch disks of its own strips and of the next band's first strip,
-                // so these chains' disks belong to this band's strips and to no other
-                // band's pairs: two bands never hold contacts of the same disk, and
-                // resolution touches only the disks of its contacts.
-                let mut disks = unsafe { shared.claim() };
-                let mut counters = StepCounters::default();
-                resolve_contacts(
-                    &mut disks,
-                    domain,
-                    physics,
-                    dt,
-                    contacts,
-                    &mut counters,
-                    |_| {},
-                );
-                counters
-            });
-            // Summed in band order, whichever thread resolved which band, then added.
-            let mut bands = StepCounters::default();
-            band_counters.iter().for_each(|band| bands.merge(band));
-            self.counters.merge(&bands);
-        }
+        // The bands' own chains and the crossing ones share no disk: either order.
+        (self.bands).resolve(particles, domain, physics, dt, &mut self.counters, team);
         resolve_contacts(
             particles,
             domain,
@@ -504,107 +367,4 @@ fn split_into_bands<'a>(
         strips = rest;
     }
     slices
-}
-
-/// Every disk's state through raw pointers, for bands that resolve disjoint chains of
-/// contacts at once. Radii and masses are only read.
-#[derive(Clone, Copy)]
-struct SharedDisks<'a> {
-    radius: &'a PerDisk,
-    mass: &'a PerDisk,
-    x: *mut f64,
-    y: *mut f64,
-    vx: *mut f64,
-    vy: *mut f64,
-}
-
-// SAFETY: the raw pointers come from a `&mut Particles` borrowed for the view's whole
-// life; `SharedDisks::claim` states the rule that makes concurrent use sound.
-unsafe impl Send for SharedDisks<'_> {}
-unsafe impl Sync for SharedDisks<'_> {}
-
-impl<'a> SharedDisks<'a> {
-    fn new(particles: &'a mut Particles) -> Self {
-        let Particles {
-            x,
-            y,
-            vx,
-            vy,
-            radius,
-            mass,
-            ..
-        } = particles;
-        SharedDisks {
-            radius,
-            mass,
-            x: x.as_mut_ptr(),
-            y: y.as_mut_ptr(),
-            vx: vx.as_mut_ptr(),
-            vy: vy.as_mut_ptr(),
-        }
-    }
-
-    /// A handle for one worker's contact resolution.
-    ///
-    /// # Safety
-    /// While the handle lives, no other thread may read or write the position or
-    /// velocity of a disk that this handle is used to access, and the handle is used only
-    /// with storage indices in bounds (below the number of disks).
-    unsafe fn claim(&self) -> ChainDisks<'a> {
-        ChainDisks(*self)
-    }
-}
-
-/// One worker's access to the disks of its chains ([`SharedDisks::claim`]).
-struct ChainDisks<'a>(SharedDisks<'a>);
-
-// SAFETY (every method): `idx` is in bounds and the disk is this worker's alone, as
-// `SharedDisks::claim` requires; `radius` has the length of the pointed-to arrays.
-impl DiskState for ChainDisks<'_> {
-    #[inline(always)]
-    fn position(&self, idx: usize) -> [f64; 2] {
-        assert!(idx < self.0.radius.len());
-        unsafe { [*self.0.x.add(idx), *self.0.y.add(idx)] }
-    }
-    #[inline(always)]
-    fn velocity(&self, idx: usize) -> [f64; 2] {
-        assert!(idx < self.0.radius.len());
-        unsafe { [*self.0.vx.add(idx), *self.0.vy.add(idx)] }
-    }
-    #[inline(always)]
-    fn radius(&self, idx: usize) -> f64 {
-        self.0.radius[idx]
-    }
-    #[inline(always)]
-    fn mass(&self, idx: usize) -> f64 {
-        self.0.mass[idx]
-    }
-    #[inline(always)]
-    fn set_position(&mut self, idx: usize, [x, y]: [f64; 2]) {
-        assert!(idx < self.0.radius.len());
-        unsafe {
-            *self.0.x.add(idx) = x;
-            *self.0.y.add(idx) = y;
-        }
-    }
-    #[inline(always)]
-    fn set_velocity(&mut self, idx: usize, [vx, vy]: [f64; 2]) {
-        assert!(idx < self.0.radius.len());
-        unsafe {
-            *self.0.vx.add(idx) = vx;
-            *self.0.vy.add(idx) = vy;
-        }
-    }
-    #[inline(always)]
-    fn prefetch_motion(&self, idx: usize) {
-        let disks = &self.0;
-        for values in [disks.x, disks.y, disks.vx, disks.vy] {
-            prefetch(values.wrapping_add(idx));
-        }
-    }
-    #[inline(always)]
-    fn prefetch_properties(&self, idx: usize) {
-        self.0.radius.prefetch(idx);
-        self.0.mass.prefetch(idx);
-    }
 }
