@@ -77,18 +77,8 @@ fn trips(bytes: usize) -> usize {
 /// (3 values, as the distributed step's), each timed in [`BLOCKS`] blocks after a
 /// warm-up. Returns what was measured on rank 0, `None` on rank 1.
 pub fn measure_network() -> Result<Option<Measured>, BackendError> {
-    // A rank's threads step its slab; only this thread, the one that starts MPI, calls
-    // it (`distributed::run`). The level MPI grants is what any OpenMPI or MPICH build
-    // gives at least, and asking for it is what the standard requires of such a rank.
-    let (universe, granted) = mpi::initialize_with_threading(mpi::Threading::Funneled)
+    let universe = mpi::initialize()
         .ok_or_else(|| BackendError::Mpi("MPI was already initialised in this process".into()))?;
-    if threads.get() > 1 && granted == mpi::Threading::Single {
-        return Err(BackendError::Mpi(format!(
-            "this MPI library allows one thread per process (MPI_THREAD_SINGLE), and \
-             --threads asks for {threads}; drop --threads or use an MPI built with thread \
-             support"
-        )));
-    }
     let world = universe.world();
     if world.size() != 2 {
         return Err(BackendError::Mpi(format!(
