@@ -354,10 +354,13 @@ impl Record {
     pub fn placement_label(&self) -> String {
         match self.threads_per_rank() {
             1 => format!("{} × {}", self.backend, self.workers),
-            per_rank => format!(
-                "{} × {} ranks × {per_rank} threads",
-                self.backend, self.ranks
-            ),
+            per_rank => {
+                let ranks = match self.ranks {
+                    1 => "1 rank".to_owned(),
+                    count => format!("{count} ranks"),
+                };
+                format!("{} × {ranks} × {per_rank} threads", self.backend)
+            }
         }
     }
 

@@ -187,11 +187,11 @@ fn colour(backend: &BackendScaling) -> RGBColor {
         Some(BackendKind::Mpi) => PALETTE[1],
         None => PALETTE[2],
     };
-    // Each doubling of the threads per rank darkens the backend's colour, so that its
-    // curves stay apart and of one family.
-    let darker = 0.6f64.powi(backend.threads_per_rank.max(1).ilog2() as i32);
-    let dim = |channel: u8| (f64::from(channel) * darker).round() as u8;
-    RGBColor(dim(base.0), dim(base.1), dim(base.2))
+    // Each doubling of the threads per rank lightens the backend's colour, so that its
+    // curves stay apart and of one family (darker would run into serial's near-black).
+    let kept = 0.6f64.powi(backend.threads_per_rank.max(1).ilog2() as i32);
+    let light = |channel: u8| (255.0 - (255.0 - f64::from(channel)) * kept).round() as u8;
+    RGBColor(light(base.0), light(base.1), light(base.2))
 }
 
 /// Ticks of a log axis over `low..high`: the first of these mantissas times the powers
@@ -320,7 +320,10 @@ impl Plot<'_> {
             .map_err(|e| anyhow!("{e}"))?;
         chart
             .configure_mesh()
-            .x_desc("workers (threads or ranks, log scale; backends side by side at each count)")
+            .x_desc(
+                "workers (threads, ranks or ranks × threads, log scale; curves side by side at \
+                 each count)",
+            )
             .y_desc(figure.axis(self.setup.scaling))
             .axis_desc_style((FONT, 18))
             .label_style((FONT, 15))
