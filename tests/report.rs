@@ -213,7 +213,11 @@ fn hybrid_records(hybrid_hash: &str) -> Vec<Record> {
 fn mpi_ranks_of_two_threads_are_a_curve_of_their_own_never_pooled_with_one_thread_ranks() {
     let records = hybrid_records("51a3e11e31576e81");
     let setups = analysis::analyse(&records).unwrap();
-    assert_eq!(setups.len(), 1, "one setup: the placement is not part of it");
+    assert_eq!(
+        setups.len(),
+        1,
+        "one setup: the placement is not part of it"
+    );
     let curves: Vec<(String, Vec<(u64, f64)>)> = (setups[0].backends.iter())
         .map(|b| {
             let points = b.points.iter().map(|p| (p.workers, p.speedup)).collect();
@@ -230,10 +234,27 @@ fn mpi_ranks_of_two_threads_are_a_curve_of_their_own_never_pooled_with_one_threa
     );
     assert_eq!(setups[0].distinct_hashes, 1);
     let text = markdown(&records);
-    assert!(text.contains("| mpi, 2 threads/rank | 4 | 5.00 |"), "{text}");
+    assert!(
+        text.contains("| mpi, 2 threads/rank | 4 | 5.00 |"),
+        "{text}"
+    );
     // The results table gives each placement its row, told apart by its threads.
     let table = collide::report::tables::summary(&records).unwrap();
-    assert!(table.contains("threads"), "{table}");
+    let rows: Vec<Vec<&str>> = (table.lines())
+        .skip_while(|l| !l.starts_with("workers"))
+        .take(4)
+        .map(|l| l.split_whitespace().take(2).collect())
+        .collect();
+    assert_eq!(
+        rows,
+        [
+            vec!["workers", "threads"],
+            vec!["1", "1"],
+            vec!["4", "1"],
+            vec!["4", "2"]
+        ],
+        "{table}"
+    );
     // The hash check names each run's placement.
     let disagree = collide::report::tables::summary(&hybrid_records("ffff")).unwrap();
     assert!(
