@@ -255,6 +255,18 @@ fn mpi_ranks_of_two_threads_are_a_curve_of_their_own_never_pooled_with_one_threa
         ],
         "{table}"
     );
+    // A configuration whose runs all failed is placed as its runs would have been.
+    let mut failed = hybrid_records("51a3e11e31576e81");
+    for record in failed.iter_mut().filter(|r| r.threads == 2) {
+        record.status = collide::study::records::STATUS_FAILED.to_owned();
+    }
+    let table = collide::report::configurations::Table::of(&failed).text();
+    let all_failed: Vec<Vec<&str>> = (table.lines())
+        .map(|l| l.split_whitespace().collect::<Vec<_>>())
+        .filter(|words| words.last() == Some(&"3"))
+        .collect();
+    assert_eq!(all_failed.len(), 1, "{table}");
+    assert_eq!(all_failed[0][..2], ["4", "2"], "{table}");
     // The hash check names each run's placement.
     let disagree = collide::report::tables::summary(&hybrid_records("ffff")).unwrap();
     assert!(
