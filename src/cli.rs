@@ -42,7 +42,7 @@ Examples:
     collide simulate experiments/scenes/seed-1000.toml
   20 times more disks on two threads, as one JSON object
     collide simulate experiments/scenes/seed-1000.toml --n 20000 --backend rayon --threads 2 --json
-  2 MPI ranks of 2 threads each (needs --features mpi; 4 CPUs, else --oversubscribe)
+  2 MPI ranks of 2 threads each, 4 workers (needs --features mpi)
     collide simulate experiments/scenes/seed-1000.toml --backend mpi --ranks 2 --threads 2
   The exact event-driven reference, with the final state as CSV
     collide simulate experiments/scenes/two-disks-head-on.toml --method event --dump final.csv";
