@@ -546,7 +546,7 @@ fn check_study_size(
         raw.scenes.span().start,
         format!(
             "the study has {n_configurations} configurations (scenes × sweep points × \
-             backends) of up to {most_repetitions} repetitions, up to {n_runs} runs; collide \
+             backends × placements) of up to {most_repetitions} repetitions, up to {n_runs} runs; collide \
              runs at most {MAX_CONFIGURATIONS} configurations and {MAX_RUNS} runs in a study: \
              sweep fewer values, lower `repetitions`, or split the study"
         ),
