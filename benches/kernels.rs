@@ -266,7 +266,15 @@ fn distributed_step(c: &mut Criterion) {
                     let ranks: Vec<_> = ThreadComm::group(RANKS)
                         .into_iter()
                         .map(|comm| {
-                            scope.spawn(move || distributed::run(&comm, spec, FinalState::Summed))
+                            // One thread per rank: the ranks are the bench's threads.
+                            scope.spawn(move || {
+                                distributed::run(
+                                    &comm,
+                                    spec,
+                                    FinalState::Summed,
+                                    std::num::NonZeroUsize::MIN,
+                                )
+                            })
                         })
                         .collect();
                     let outcomes: Vec<_> = ranks.into_iter().map(|r| r.join()).collect();

@@ -444,7 +444,7 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let mut spec = scene_file::load(&args.scene, &args.overrides)?;
     let capabilities = args.backend.capabilities();
     let copies = match (capabilities.scene_in_every_process, backend) {
-        (true, BackendSpec::Mpi { ranks }) => {
+        (true, BackendSpec::Mpi { ranks, .. }) => {
             spec.whole_scene_copies(ranks.map_or_else(usable_cpus, NonZeroUsize::get))
         }
         _ => 1,
@@ -473,7 +473,9 @@ fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         BackendSpec::Rayon { threads } => {
             Finished::Here(threads::run(&spec, threads).with_context(context)?)
         }
-        BackendSpec::Mpi { ranks } => run_mpi(args, &spec, ranks).with_context(context)?,
+        BackendSpec::Mpi { ranks, threads } => {
+            run_mpi(args, &spec, ranks, threads).with_context(context)?
+        }
     };
     let summary = match finished {
         Finished::Here(outcome) => {
@@ -542,11 +544,14 @@ enum Finished {
     OtherRank,
 }
 
+/// Runs `spec` on MPI ranks, each stepping on `threads` threads (`--threads`): as one
+/// rank when an MPI launcher started this process, else by launching them.
 #[cfg(feature = "mpi")]
 fn run_mpi(
     args: &SimulateArgs,
     spec: &crate::run::spec::RunSpec,
     ranks: Option<NonZeroUsize>,
+    threads: Option<NonZeroUsize>,
 ) -> anyhow::Result<Finished> {
     use crate::backend::distributed::FinalState;
     use crate::backend::{launcher, mpi};
@@ -560,7 +565,7 @@ fn run_mpi(
                 spec,
                 ranks.map(NonZeroUsize::get),
                 final_state,
-                NonZeroUsize::MIN,
+                rank_threads(threads)?,
             )? {
                 Some(outcome) => Finished::Here(outcome),
                 None => Finished::OtherRank,
@@ -575,11 +580,11 @@ fn run_mpi(
     let layout = crate::cluster::placement::Layout {
         nodes: args.nodes.map_or(1, NonZeroUsize::get),
         ranks: ranks.map_or_else(usable_cpus, NonZeroUsize::get),
-        threads: 1,
+        threads: threads.map_or(1, NonZeroUsize::get),
     };
     layout
         .check(&site, true)
-        .map_err(|reason| anyhow::anyhow!("--nodes and --ranks: {reason}"))?;
+        .map_err(|reason| anyhow::anyhow!("--nodes, --ranks and --threads: {reason}"))?;
     let launch = launcher::Launch {
         layout,
         site,
@@ -591,6 +596,28 @@ fn run_mpi(
         forwarded.push("--json".into());
     }
     Ok(Finished::Launched(launcher::launch(&launch, &forwarded)?))
+}
+
+/// The threads a rank steps on: `--threads`, else [`THREADS_ENV`] (which collide's
+/// launch line sets for every rank it starts), else 1; a bad variable is named as such.
+#[cfg(feature = "mpi")]
+fn rank_threads(given: Option<NonZeroUsize>) -> anyhow::Result<NonZeroUsize> {
+    use crate::cluster::render::THREADS_ENV;
+    if let Some(threads) = given {
+        return Ok(threads);
+    }
+    let Some(text) = std::env::var_os(THREADS_ENV) else {
+        return Ok(NonZeroUsize::MIN);
+    };
+    text.to_str()
+        .and_then(|text| text.trim().parse::<NonZeroUsize>().ok())
+        .ok_or_else(|| {
+            anyhow::anyhow!(
+                "the environment variable {THREADS_ENV}={text:?} sets the threads of each MPI \
+                 rank when --threads is not given, and is not a whole number of at least 1; \
+                 fix or unset it, or give --threads"
+            )
+        })
 }
 
 /// The variable that sets `--mpi-timeout` when the flag is not given.
@@ -619,6 +646,7 @@ fn run_mpi(
     _: &SimulateArgs,
     _: &crate::run::spec::RunSpec,
     _: Option<NonZeroUsize>,
+    _: Option<NonZeroUsize>,
 ) -> anyhow::Result<Finished> {
     bail!(
         "this collide was built without MPI support; to use --backend mpi, {}",
@@ -632,11 +660,16 @@ fn usable_cpus() -> usize {
 }
 
 /// The backend the flags ask for; worker counts only go with the backend they count, and
-/// stay under the machine's ceiling unless `--oversubscribe` insists.
+/// the workers (threads, or MPI ranks × threads per rank) stay under the machine's
+/// ceiling unless `--oversubscribe` insists.
 fn backend_spec(args: &SimulateArgs, machine: &Machine) -> anyhow::Result<BackendSpec> {
     let name = args.backend;
-    if args.threads.is_some() && name != BackendKind::Rayon {
-        bail!("--threads sets the rayon pool size; add `--backend rayon` or drop --threads");
+    if args.threads.is_some() && !name.is_parallel() {
+        bail!(
+            "--threads sets the threads of the rayon pool (--backend rayon) or of each MPI \
+             rank (--backend mpi), and the serial backend steps on one; add `--backend rayon` \
+             or `--backend mpi`, or drop --threads"
+        );
     }
     if args.ranks.is_some() && name != BackendKind::Mpi {
         bail!("--ranks sets the MPI process count; add `--backend mpi` or drop --ranks");
@@ -644,15 +677,23 @@ fn backend_spec(args: &SimulateArgs, machine: &Machine) -> anyhow::Result<Backen
     if args.nodes.is_some() && name != BackendKind::Mpi {
         bail!("--nodes spreads MPI ranks over nodes; add `--backend mpi` or drop --nodes");
     }
-    for (flag, workers) in [("--threads", args.threads), ("--ranks", args.ranks)] {
-        if let Some(workers) = workers {
-            let source = WorkerSource {
-                field: flag,
-                insist: "add --oversubscribe",
-            };
-            check_workers(workers.get(), machine, args.oversubscribe, source)
-                .map_err(anyhow::Error::msg)?;
-        }
+    // The workers the flags ask for, named by the flags that set them.
+    let asked = match (name, args.ranks, args.threads) {
+        (BackendKind::Mpi, ranks, Some(threads)) => Some((
+            "--ranks × --threads",
+            // Without --ranks, collide launches one rank per usable CPU.
+            ranks.map_or_else(usable_cpus, NonZeroUsize::get) * threads.get(),
+        )),
+        (_, Some(ranks), _) => Some(("--ranks", ranks.get())),
+        (_, None, Some(threads)) => Some(("--threads", threads.get())),
+        (_, None, None) => None,
+    };
+    if let Some((field, workers)) = asked {
+        let source = WorkerSource {
+            field,
+            insist: "add --oversubscribe",
+        };
+        check_workers(workers, machine, args.oversubscribe, source).map_err(anyhow::Error::msg)?;
     }
     Ok(match name {
         BackendKind::Serial => BackendSpec::Serial,
@@ -661,6 +702,9 @@ fn backend_spec(args: &SimulateArgs, machine: &Machine) -> anyhow::Result<Backen
                 .threads
                 .unwrap_or_else(|| NonZeroUsize::new(usable_cpus()).unwrap_or(NonZeroUsize::MIN)),
         },
-        BackendKind::Mpi => BackendSpec::Mpi { ranks: args.ranks },
+        BackendKind::Mpi => BackendSpec::Mpi {
+            ranks: args.ranks,
+            threads: args.threads,
+        },
     })
 }

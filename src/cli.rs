@@ -42,6 +42,8 @@ Examples:
     collide simulate experiments/scenes/seed-1000.toml
   20 times more disks on two threads, as one JSON object
     collide simulate experiments/scenes/seed-1000.toml --n 20000 --backend rayon --threads 2 --json
+  2 MPI ranks of 2 threads each, 4 workers (needs --features mpi)
+    collide simulate experiments/scenes/seed-1000.toml --backend mpi --ranks 2 --threads 2
   The exact event-driven reference, with the final state as CSV
     collide simulate experiments/scenes/two-disks-head-on.toml --method event --dump final.csv";
 
@@ -333,14 +335,16 @@ pub struct SimulateArgs {
     /// How to run the steps: serial (the reference), rayon (threads) or mpi (ranks).
     #[arg(long, value_enum, default_value_t = BackendKind::Serial)]
     pub backend: BackendKind,
-    /// Threads of the rayon pool (with --backend rayon; default: the logical cores).
+    /// Threads of the rayon pool (with --backend rayon; default: the usable CPUs), or
+    /// threads each MPI rank steps on (with --backend mpi; default: 1, or under an MPI
+    /// launcher the ranks' RAYON_NUM_THREADS when set). --ranks × --threads CPUs are used.
     #[arg(long, value_parser = parse_workers, allow_negative_numbers = true)]
     pub threads: Option<NonZeroUsize>,
     /// MPI ranks to launch (with --backend mpi; default under mpirun: its world size).
     #[arg(long, value_parser = parse_workers, allow_negative_numbers = true)]
     pub ranks: Option<NonZeroUsize>,
-    /// Allow more than 8 threads or ranks per usable CPU (refused otherwise: such a
-    /// run measures the scheduler rather than the simulation).
+    /// Allow more than 8 workers (threads, or ranks × threads) per usable CPU (refused
+    /// otherwise: such a run measures the scheduler rather than the simulation).
     #[arg(long)]
     pub oversubscribe: bool,
     /// MPI launcher and its options, followed by `-n RANKS` and this program

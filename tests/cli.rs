@@ -234,7 +234,7 @@ fn bad_worker_counts_are_rejected_with_the_fix() {
     }
     assert_rejected(
         &["simulate", path, "--threads", "2"],
-        &["--threads", "--backend rayon"],
+        &["--threads", "serial backend steps on one", "--backend mpi"],
     );
     assert_rejected(
         &["simulate", path, "--backend", "rayon", "--ranks", "2"],
@@ -242,15 +242,53 @@ fn bad_worker_counts_are_rejected_with_the_fix() {
     );
 }
 
+/// `collide simulate ARGS` with `COLLIDE_USABLE_CPUS=1` (a machine of one CPU, so at
+/// most 8 workers): its output.
+fn on_one_cpu(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_collide"))
+        .arg("simulate")
+        .args(args)
+        .env("COLLIDE_USABLE_CPUS", "1")
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn mpi_ranks_times_threads_are_held_to_the_worker_ceiling_unless_insisted() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = scene_file(dir.path(), "gas.toml", GAS);
+    let path = path.to_str().unwrap();
+    let hybrid = [path, "--backend", "mpi", "--ranks", "3", "--threads", "3"];
+    let refused = on_one_cpu(&hybrid);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{stderr}");
+    for fragment in [
+        "--ranks × --threads asks for 9 workers",
+        "add --oversubscribe",
+    ] {
+        assert!(stderr.contains(fragment), "`{fragment}` not in: {stderr}");
+    }
+    // Each count alone is within the ceiling: only their product is refused.
+    let insisted = on_one_cpu(&[&hybrid[..], &["--oversubscribe", "--steps", "2"]].concat());
+    let stderr = String::from_utf8_lossy(&insisted.stderr);
+    assert!(!stderr.contains("asks for"), "{stderr}");
+}
+
 #[cfg(not(feature = "mpi"))]
 #[test]
 fn mpi_without_the_feature_says_how_to_build_it() {
     let dir = tempfile::tempdir().unwrap();
     let path = scene_file(dir.path(), "gas.toml", GAS);
-    assert_rejected(
-        &["simulate", path.to_str().unwrap(), "--backend", "mpi"],
-        &["without MPI support", "--features mpi", "libopenmpi-dev"],
-    );
+    for threads in [&[][..], &["--threads", "2"]] {
+        assert_rejected(
+            &[
+                &["simulate", path.to_str().unwrap(), "--backend", "mpi"],
+                threads,
+            ]
+            .concat(),
+            &["without MPI support", "--features mpi", "libopenmpi-dev"],
+        );
+    }
 }
 
 #[test]

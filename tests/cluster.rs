@@ -117,6 +117,11 @@ fn threads_and_oversubscription_reach_every_launcher() {
             line.env
         );
         assert!(line.env.contains(&("RAYON_NUM_THREADS".into(), "2".into())));
+        // OpenMPI refuses to bind ranks × PE=threads beyond the cores: such ranks go
+        // unbound.
+        if launcher == "mpirun" {
+            assert!(argv.contains("--bind-to none"), "{argv}");
+        }
         // Within the cores, no rank is told to yield.
         let fits = launch_line(&site, LAYOUTS[0]);
         assert!(

@@ -212,3 +212,68 @@ fn a_hung_launch_is_killed_at_the_timeout_and_a_failed_one_is_reported() {
     assert!(stderr.contains("cannot start `no-such-mpirun`"), "{stderr}");
     assert!(stderr.contains("COLLIDE_MPI_LAUNCHER"), "{stderr}");
 }
+
+#[test]
+fn mpi_ranks_of_two_threads_give_the_serial_hash_and_count_their_workers() {
+    let scene = "experiments/scenes/seed-1000.toml";
+    let serial = summary(&["simulate", scene, "--steps", "50"]);
+    // 2 ranks × 2 threads: more than this 2-CPU machine holds, so insisted on.
+    let hybrid = summary(&[
+        "simulate",
+        scene,
+        "--steps",
+        "50",
+        "--backend",
+        "mpi",
+        "--ranks",
+        "2",
+        "--threads",
+        "2",
+        "--oversubscribe",
+    ]);
+    assert_eq!(hybrid["state_hash"], serial["state_hash"]);
+    let placed = ["ranks", "threads", "workers"].map(|field| hybrid[field].as_u64());
+    assert_eq!(placed, [Some(2), Some(2), Some(4)], "{hybrid}");
+}
+
+/// `mpirun -n 2 collide simulate ... --backend mpi` started by hand, with `RAYON_NUM_THREADS`
+/// set to `threads`: its output.
+fn ranks_under_mpirun(threads: &str) -> std::process::Output {
+    std::process::Command::new("mpirun")
+        .args(["-n", "2", "--oversubscribe", "--bind-to", "none"])
+        .arg(env!("CARGO_BIN_EXE_collide"))
+        .args([
+            "simulate",
+            "experiments/scenes/seed-1000.toml",
+            "--steps",
+            "20",
+        ])
+        .args(["--backend", "mpi", "--json"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("RAYON_NUM_THREADS", threads)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn ranks_without_threads_take_rayon_num_threads_and_name_it_when_wrong() {
+    let out = ranks_under_mpirun("2");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    assert_eq!(json["threads"].as_u64(), Some(2), "{json}");
+    assert_eq!(json["workers"].as_u64(), Some(4), "{json}");
+    let out = ranks_under_mpirun("two");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("RAYON_NUM_THREADS=\"two\"") && stderr.contains("--threads"),
+        "{stderr}"
+    );
+}

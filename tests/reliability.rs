@@ -131,7 +131,7 @@ fn sample_row(study: &str) -> records::Record {
         scene_hash: "0123456789abcdef",
         scaling: "strong",
         backend: BackendKind::Serial,
-        workers: 1,
+        placement: BackendKind::Serial.placement(1),
         repetition: 0,
         environment: &environment,
         study_started_utc: "2025-01-01T00:00:00Z",

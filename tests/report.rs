@@ -3,7 +3,7 @@
 
 use collide::report::figures::scaling::{self, Figure};
 use collide::report::{analysis, markdown};
-use collide::run::backend_kind::BackendKind;
+use collide::run::backend_kind::{BackendKind, Placement};
 use collide::run::summary::RunSummary;
 use collide::study::environment::Environment;
 use collide::study::records::{Record, RecordContext};
@@ -147,7 +147,7 @@ fn study_records(scaling: &str) -> Vec<Record> {
                 scene_hash: "0123456789abcdef",
                 scaling,
                 backend,
-                workers: workers as u64,
+                placement: backend.placement(workers),
                 repetition,
                 environment: &environment,
                 study_started_utc: "2026-11-22T12:00:00Z",
@@ -168,6 +168,112 @@ fn study_records(scaling: &str) -> Vec<Record> {
         }
     }
     records
+}
+
+/// An MPI study of one setup: 1 rank, 4 ranks of 1 thread and 2 ranks of 2 threads (4
+/// workers each), three runs each; the runs of 2 × 2 end in `hybrid_hash`.
+fn hybrid_records(hybrid_hash: &str) -> Vec<Record> {
+    let environment = environment();
+    let mut records = Vec::new();
+    for (ranks, threads, wall_s) in [(1, 1, 0.0100), (4, 1, 0.0040), (2, 2, 0.0020)] {
+        let per_rank = match threads {
+            1 => String::new(),
+            count => format!(";threads={count}"),
+        };
+        let key = format!(
+            "scene=seed-1000;n=-;packing=-;dt=-;steps=-;seed=-;broadphase=-;backend=mpi;\
+             workers={ranks}{per_rank}"
+        );
+        for repetition in 0..3 {
+            let context = RecordContext {
+                study: "hybrid",
+                manifest_hash: "m",
+                build_id: "b",
+                config_key: &key,
+                scene: "seed-1000",
+                scene_hash: "0123456789abcdef",
+                scaling: "strong",
+                backend: BackendKind::Mpi,
+                placement: Placement { ranks, threads },
+                repetition,
+                environment: &environment,
+                study_started_utc: "2026-11-22T12:00:00Z",
+            };
+            let mut run = summary("mpi", threads, ranks, 1000, wall_s);
+            if threads > 1 {
+                run.state_hash = hybrid_hash.into();
+            }
+            records.push(Record::measured(&context, &run));
+        }
+    }
+    records
+}
+
+#[test]
+fn mpi_ranks_of_two_threads_are_a_curve_of_their_own_never_pooled_with_one_thread_ranks() {
+    let records = hybrid_records("51a3e11e31576e81");
+    let setups = analysis::analyse(&records).unwrap();
+    assert_eq!(
+        setups.len(),
+        1,
+        "one setup: the placement is not part of it"
+    );
+    let curves: Vec<(String, Vec<(u64, f64)>)> = (setups[0].backends.iter())
+        .map(|b| {
+            let points = b.points.iter().map(|p| (p.workers, p.speedup)).collect();
+            (b.label(), points)
+        })
+        .collect();
+    // Both start from one rank of one thread: 0.01 s.
+    assert_eq!(
+        curves,
+        [
+            ("mpi".to_owned(), vec![(1, 1.0), (4, 2.5)]),
+            ("mpi, 2 threads/rank".to_owned(), vec![(4, 5.0)])
+        ]
+    );
+    assert_eq!(setups[0].distinct_hashes, 1);
+    let text = markdown(&records);
+    assert!(
+        text.contains("| mpi, 2 threads/rank | 4 | 5.00 |"),
+        "{text}"
+    );
+    // The results table gives each placement its row, told apart by its threads.
+    let table = collide::report::tables::summary(&records).unwrap();
+    let rows: Vec<Vec<&str>> = (table.lines())
+        .skip_while(|l| !l.starts_with("workers"))
+        .take(4)
+        .map(|l| l.split_whitespace().take(2).collect())
+        .collect();
+    assert_eq!(
+        rows,
+        [
+            vec!["workers", "threads"],
+            vec!["1", "1"],
+            vec!["4", "1"],
+            vec!["4", "2"]
+        ],
+        "{table}"
+    );
+    // A configuration whose runs all failed is placed as its runs would have been.
+    let mut failed = hybrid_records("51a3e11e31576e81");
+    for record in failed.iter_mut().filter(|r| r.threads == 2) {
+        record.status = collide::study::records::STATUS_FAILED.to_owned();
+    }
+    let table = collide::report::configurations::Table::of(&failed).text();
+    let all_failed: Vec<Vec<&str>> = (table.lines())
+        .map(|l| l.split_whitespace().collect::<Vec<_>>())
+        .filter(|words| words.last() == Some(&"3"))
+        .collect();
+    assert_eq!(all_failed.len(), 1, "{table}");
+    assert_eq!(all_failed[0][..2], ["4", "2"], "{table}");
+    // The hash check names each run's placement.
+    let disagree = collide::report::tables::summary(&hybrid_records("ffff")).unwrap();
+    assert!(
+        disagree.contains("ffff: mpi × 2 ranks × 2 threads")
+            && disagree.contains("mpi × 1, mpi × 4"),
+        "{disagree}"
+    );
 }
 
 fn markdown(records: &[Record]) -> String {

@@ -110,7 +110,7 @@ pub fn sample_records() -> Vec<Record> {
         scene_hash: "0123456789abcdef",
         scaling: "strong",
         backend: BackendKind::Rayon,
-        workers: 2,
+        placement: BackendKind::Rayon.placement(2),
         repetition: 1,
         environment: &environment,
         study_started_utc: "2026-11-22T00:00:00Z",

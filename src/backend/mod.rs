@@ -43,9 +43,11 @@ pub enum BackendSpec {
         threads: NonZeroUsize,
     },
     /// MPI ranks: launched by collide itself (`Some`), or taken from the MPI world when
-    /// collide already runs under `mpirun` (`None`).
+    /// collide already runs under `mpirun` (`None`); each steps on `threads` threads
+    /// (`None`: as the rank's environment says, else one).
     Mpi {
         ranks: Option<NonZeroUsize>,
+        threads: Option<NonZeroUsize>,
     },
 }
 

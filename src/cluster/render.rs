@@ -5,8 +5,9 @@
 //!
 //! The traps each line avoids: `srun` inside a job does not inherit `--cpus-per-task`
 //! (Slurm 22.05–23.02), so it is passed to `srun` too; OpenMPI binds a rank to one core
-//! (np ≤ 2) or a socket unless told `--map-by …:PE=T`; an oversubscribed OpenMPI rank
-//! busy-polls unless `OMPI_MCA_mpi_yield_when_idle=1`; a job script ending in a
+//! (np ≤ 2) or a socket unless told `--map-by …:PE=T`, and refuses to bind at all when
+//! ranks × threads exceed the cores (so oversubscribed ranks are not bound); an
+//! oversubscribed OpenMPI rank busy-polls unless `OMPI_MCA_mpi_yield_when_idle=1`; a job script ending in a
 //! pipeline reports success when its ranks crashed, so scripts `set -euo pipefail` and
 //! write their exit code from a `trap` on every exit.
 
@@ -59,7 +60,10 @@ pub fn launch_line(site: &Site, layout: Layout) -> Line {
                 words.extend(["--map-by".into(), format!("slot:PE={threads}")]);
             }
             if nodes > 1 || threads > 1 {
-                let to = if pin { "core" } else { "none" };
+                // Oversubscribed, OpenMPI refuses to bind (each rank's PE=T cores are not
+                // there: "binding more processes than cpus"), so the ranks are left
+                // unbound and the kernel shares the cores among them.
+                let to = if pin && !over { "core" } else { "none" };
                 words.extend(["--bind-to".into(), to.into()]);
             }
             if over {

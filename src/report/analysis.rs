@@ -119,14 +119,25 @@ pub enum Baseline {
     Missing,
 }
 
+/// One scaling curve: a backend's runs at one number of threads per MPI rank.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BackendScaling {
     pub backend: String,
+    /// The threads each MPI rank stepped on ([`Record::threads_per_rank`]): 1 but for
+    /// MPI ranks on several threads each.
+    pub threads_per_rank: u64,
     pub baseline: Baseline,
     /// By worker count.
     pub points: Vec<Point>,
     /// The Amdahl fit, or why it is not shown.
     pub amdahl: Result<AmdahlFit, NoFit>,
+}
+
+impl BackendScaling {
+    /// The curve's name in tables and legends ([`records::curve_label`]).
+    pub fn label(&self) -> String {
+        records::curve_label(&self.backend, self.threads_per_rank)
+    }
 }
 
 /// One physical setup (same scene, n, steps, dt, packing, seed, broad phase) under every
@@ -146,7 +157,7 @@ pub struct Setup {
     /// The other values its configurations set (`method=event`, `tc=0`, ...), which tell
     /// it apart from setups of the same scene, n, steps, dt and packing.
     pub settings: Vec<String>,
-    /// Serial first, then rayon, then MPI.
+    /// Serial first, then rayon, then MPI (by threads per rank).
     pub backends: Vec<BackendScaling>,
     /// The most distinct final-state hashes among the successful runs of one physical
     /// setup (1 means all backends agree).
@@ -193,7 +204,7 @@ pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {
     };
     let mut setups: Vec<Setup> = Vec::new();
     let mut series_order: Vec<String> = Vec::new();
-    for (series, backend, point) in points {
+    for (series, (backend, threads_per_rank), point) in points {
         let index = match series_order.iter().position(|s| *s == series) {
             Some(index) => index,
             None => {
@@ -220,10 +231,14 @@ pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {
             }
         };
         let setup = &mut setups[index];
-        match setup.backends.iter_mut().find(|b| b.backend == backend) {
+        let curve = |b: &&mut BackendScaling| {
+            b.backend == backend && b.threads_per_rank == threads_per_rank
+        };
+        match setup.backends.iter_mut().find(curve) {
             Some(scaling) => scaling.points.push(point),
             None => setup.backends.push(BackendScaling {
                 backend,
+                threads_per_rank,
                 baseline: Baseline::Missing,
                 points: vec![point],
                 amdahl: Err(NoFit::FewWorkerCounts(0)),
@@ -237,18 +252,24 @@ pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {
 }
 
 /// The records as a polars table, with each row's series (what one scaling curve
-/// shares) and physical setup (what must end in the same state) as key columns.
+/// shares), physical setup (what must end in the same state) and threads per rank
+/// (which curve of its backend) as key columns.
 fn keyed_frame(records: &[Record], series_keys: &[String]) -> PolarsResult<DataFrame> {
     let mut frame = records::to_frame(records)?;
     let setup: Vec<String> = records.iter().map(Record::setup_key).collect();
+    let per_rank: Vec<u64> = records.iter().map(Record::threads_per_rank).collect();
     frame.with_column(Column::new("series".into(), series_keys))?;
     frame.with_column(Column::new("setup".into(), setup))?;
+    frame.with_column(Column::new("threads_per_rank".into(), per_rank))?;
     Ok(frame)
 }
 
+/// A scaling curve's backend and threads per rank.
+type Curve = (String, u64);
+
 /// Median, min and max time, repetitions and median FPS per (series, backend, placement),
-/// in first-seen order: (series, backend, point without its derived ratios).
-fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Point)>> {
+/// in first-seen order: (series, curve, point without its derived ratios).
+fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, Curve, Point)>> {
     let table = frame
         .clone()
         .lazy()
@@ -259,6 +280,7 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Poi
             col("workers"),
             col("ranks"),
             col("threads"),
+            col("threads_per_rank"),
         ])
         .agg([
             col("wall_s").median().alias("median_s"),
@@ -278,6 +300,7 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Poi
     let series = table.column("series")?.str()?;
     let backend = table.column("backend")?.str()?;
     let workers = table.column("workers")?.u64()?;
+    let per_rank = table.column("threads_per_rank")?.u64()?;
     let median_s = table.column("median_s")?.f64()?;
     let times = table.column("times")?.list()?;
     let min_s = table.column("min_s")?.f64()?;
@@ -318,7 +341,8 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, String, Poi
                 karp_flatt: f64::NAN,
             };
             let text = |column: &StringChunked| column.get(i).unwrap_or_default().to_owned();
-            Ok((text(series), text(backend), point))
+            let curve = (text(backend), per_rank.get(i).unwrap_or(1));
+            Ok((text(series), curve, point))
         })
         .collect()
 }
@@ -348,25 +372,26 @@ fn distinct_hashes_per_series(frame: &DataFrame) -> PolarsResult<BTreeMap<String
 fn derive_scaling(setup: &mut Setup) {
     setup
         .backends
-        .sort_by_key(|b| BackendKind::rank_of(&b.backend));
+        .sort_by_key(|b| (BackendKind::rank_of(&b.backend), b.threads_per_rank));
     for backend in &mut setup.backends {
         backend.points.sort_by_key(|p| p.workers);
     }
-    let one_worker = |backend: &BackendScaling| {
-        backend
-            .points
-            .iter()
+    // A backend's time at one worker, whichever of its curves measured it: one rank of
+    // one thread is the start of its curves of several threads per rank too.
+    let one_worker = |name: &str| {
+        (setup.backends.iter())
+            .filter(|b| b.backend == name)
+            .flat_map(|b| &b.points)
             .find(|p| p.workers == 1)
             .map(|p| p.median_s)
     };
-    let serial = setup
-        .backends
-        .iter()
-        .find(|b| b.backend == BackendKind::Serial.name())
-        .and_then(one_worker);
+    let serial = one_worker(BackendKind::Serial.name());
+    let own: Vec<Option<f64>> = (setup.backends.iter())
+        .map(|b| one_worker(&b.backend))
+        .collect();
     let weak = setup.scaling == Scaling::Weak;
-    for backend in &mut setup.backends {
-        backend.baseline = match (serial, one_worker(backend)) {
+    for (backend, own) in setup.backends.iter_mut().zip(own) {
+        backend.baseline = match (serial, own) {
             (Some(t), _) => Baseline::Serial(t),
             (None, Some(t)) => Baseline::OneWorker(t),
             (None, None) => Baseline::Missing,

@@ -37,6 +37,11 @@ const GROUPED: [&str; 5] = ["study", "scene", "backend", "workers", "n"];
 /// scene edited between two results files) and the side of an A/B check.
 const CONTEXT: [&str; 2] = ["scene_hash", "ab_side"];
 
+/// The settings whose column every row holds, a failed run's too (its configuration
+/// placed it): read from the column first, since the key's `workers=` counts an MPI
+/// configuration's ranks and the column its ranks × threads.
+const PLACED: [&str; 2] = ["workers", "threads"];
+
 /// Significant digits of a setting's number (dt, packing, tc).
 const SETTING_DIGITS: usize = 4;
 
@@ -410,10 +415,10 @@ fn row(group: &[&Record], names: &[String]) -> Row {
     }
 }
 
-/// The setting `name` of `record`'s configuration: for a run that succeeded, the
-/// record's column of that name (the value the run resolved, such as the scene's n or an
-/// automatic dt); for one that failed (its run's columns hold nothing), the configuration
-/// key's entry (a number, true or false, or text; null where the key leaves it to the
+/// The setting `name` of `record`'s configuration: for a run that succeeded, and for
+/// the [`PLACED`] settings, the record's column of that name (the value the run
+/// resolved, such as the scene's n or an automatic dt); for one that failed (its run's
+/// columns hold nothing), the configuration key's entry (a number, true or false, or text; null where the key leaves it to the
 /// scene). The other source where one has no such name.
 fn setting(record: &Record, name: &str) -> Value {
     let keyed = record
@@ -425,7 +430,7 @@ fn setting(record: &Record, name: &str) -> Value {
             text => serde_json::from_str(text).unwrap_or_else(|_| Value::from(text)),
         });
     let column = record.value(name);
-    let found = match record.status == STATUS_OK {
+    let found = match record.status == STATUS_OK || PLACED.contains(&name) {
         true => column.or(keyed),
         false => keyed.or(column),
     };

@@ -163,7 +163,7 @@ fn warnings(out: &mut String, records: &[Record], setups: &[Setup]) {
     let mut oversubscribed: Vec<String> = records
         .iter()
         .filter(|r| r.oversubscribed && r.status == STATUS_OK)
-        .map(|r| format!("{} × {}", r.backend, r.workers))
+        .map(Record::placement_label)
         .collect();
     oversubscribed.sort();
     oversubscribed.dedup();
@@ -301,7 +301,10 @@ fn noise_warning(out: &mut String, records: &[Record], setups: &[Setup]) {
                     .map(move |p| {
                         format!(
                             "{} × {} (n = {}, packing {:.3})",
-                            b.backend, p.workers, setup.n, setup.packing
+                            b.label(),
+                            p.workers,
+                            setup.n,
+                            setup.packing
                         )
                     })
             })
@@ -393,7 +396,7 @@ fn seconds_table(out: &mut String, setup: &Setup) {
     let _ = writeln!(out, "### Time per run (the seed's Cuadro 1)\n");
     let _ = write!(out, "| workers |");
     for (backend, unit) in setup.backends.iter().zip(&units) {
-        let _ = write!(out, " {} [{}] |", backend.backend, unit.symbol());
+        let _ = write!(out, " {} [{}] |", backend.label(), unit.symbol());
     }
     let _ = write!(out, "\n| ---: |");
     for _ in &setup.backends {
@@ -471,7 +474,7 @@ fn speedup_baselines(out: &mut String, setup: &Setup) {
         let _ = writeln!(
             out,
             "- **{}**: speedup against {baseline}.",
-            backend.backend
+            backend.label()
         );
     }
 }
@@ -514,7 +517,7 @@ fn speedup_rows(out: &mut String, setup: &Setup, sent: bool) {
             let _ = writeln!(
                 out,
                 "| {} | {} | {:.2} | {:.0}% | {karp_flatt} | {:.0} |{drawn}{sent}",
-                backend.backend,
+                backend.label(),
                 point.workers,
                 point.speedup,
                 100.0 * point.efficiency,
@@ -555,7 +558,7 @@ fn speedup_notes(out: &mut String, setup: &Setup, sent: bool) {
                     .collect();
                 format!(
                     "{}: f = {:.3} (R² = {:.3}; residuals {})",
-                    b.backend,
+                    b.label(),
                     fit.serial_fraction,
                     fit.r_squared,
                     residuals.join(", ")
@@ -581,7 +584,7 @@ fn speedup_notes(out: &mut String, setup: &Setup, sent: bool) {
             b.amdahl
                 .as_ref()
                 .err()
-                .map(|why| format!("{}: {}", b.backend, why.reason()))
+                .map(|why| format!("{}: {}", b.label(), why.reason()))
         })
         .collect();
     if !not_shown.is_empty() {
@@ -601,7 +604,7 @@ fn findings(out: &mut String, setups: &[Setup]) {
         let all = setup
             .backends
             .iter()
-            .flat_map(|b| b.points.iter().map(move |p| (b.backend.as_str(), p)));
+            .flat_map(|b| b.points.iter().map(move |p| (b.label(), p)));
         if let Some((backend, best)) = all
             .clone()
             .min_by(|a, b| a.1.median_s.total_cmp(&b.1.median_s))
@@ -626,7 +629,7 @@ fn findings(out: &mut String, setups: &[Setup]) {
                 let _ = writeln!(
                     out,
                     "- {} efficiency falls below {:.0}% at {}.",
-                    backend.backend,
+                    backend.label(),
                     100.0 * EFFICIENCY_FLOOR,
                     low.join(", ")
                 );

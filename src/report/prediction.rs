@@ -206,13 +206,16 @@ struct Config {
     share: f64,
 }
 
-/// The study's configurations that the model reads: serial runs (as 1 rank) and MPI runs.
+/// The study's configurations that the model reads: serial runs (as 1 rank) and MPI runs
+/// of one thread per rank (the model's ranks step on one thread; ranks on several are
+/// left out rather than pooled with them).
 fn configs(records: &[Record]) -> Vec<Config> {
     let mut groups: BTreeMap<(String, u64, u64), Vec<&Record>> = BTreeMap::new();
     for r in records.iter().filter(|r| {
         r.status == STATUS_OK
             && r.method == "step"
             && (r.backend == "serial" || r.backend == "mpi")
+            && r.threads == 1
             && r.steps > 0
             && r.n > 0
     }) {

@@ -104,20 +104,30 @@ pub fn scaling_table(setups: &[Setup]) -> String {
         let units: Vec<TimeUnit> = (setup.backends.iter())
             .map(|b| TimeUnit::for_column(b.points.iter().map(|p| p.median_s)))
             .collect();
+        // A curve's column is as wide as its label (`mpi, 2 threads/rank`), at least 12.
+        let widths: Vec<usize> = (setup.backends.iter())
+            .map(|b| b.label().chars().count().max(12))
+            .collect();
         let _ = write!(out, "{:>7}", "workers");
-        for backend in &setup.backends {
-            let _ = write!(out, " {:>12} {:>7} {:>6}", backend.backend, "S(p)", "E(p)");
+        for (backend, width) in setup.backends.iter().zip(&widths) {
+            let _ = write!(
+                out,
+                " {:>width$} {:>7} {:>6}",
+                backend.label(),
+                "S(p)",
+                "E(p)"
+            );
         }
         let _ = writeln!(out);
         for p in workers {
             let _ = write!(out, "{p:>7}");
-            for (backend, unit) in setup.backends.iter().zip(&units) {
+            for ((backend, unit), width) in setup.backends.iter().zip(&units).zip(&widths) {
                 match backend.points.iter().find(|point| point.workers == p) {
                     // Without a serial or 1-worker run there is no speedup to show.
                     Some(point) if point.speedup.is_finite() => {
                         let _ = write!(
                             out,
-                            " {:>12} {:>7.2} {:>5.0}%",
+                            " {:>width$} {:>7.2} {:>5.0}%",
                             unit.format(point.median_s),
                             point.speedup,
                             100.0 * point.efficiency
@@ -126,14 +136,14 @@ pub fn scaling_table(setups: &[Setup]) -> String {
                     Some(point) => {
                         let _ = write!(
                             out,
-                            " {:>12} {:>7} {:>6}",
+                            " {:>width$} {:>7} {:>6}",
                             unit.format(point.median_s),
                             "—",
                             "—"
                         );
                     }
                     None => {
-                        let _ = write!(out, " {:>12} {:>7} {:>6}", "", "", "");
+                        let _ = write!(out, " {:>width$} {:>7} {:>6}", "", "", "");
                     }
                 }
             }
@@ -305,13 +315,17 @@ pub fn one_study<'a>(records: &'a [Record], path: &Path) -> anyhow::Result<&'a s
 fn hash_agreement(records: &[Record]) -> String {
     let mut setups: BTreeMap<String, (String, BTreeMap<&str, Vec<String>>)> = BTreeMap::new();
     for record in records.iter().filter(|r| r.status == STATUS_OK) {
-        setups
+        let who = setups
             .entry(record.setup_key())
             .or_insert_with(|| (record.setup_label(), BTreeMap::new()))
             .1
             .entry(&record.state_hash)
-            .or_default()
-            .push(format!("{} {}", record.backend, record.workers));
+            .or_default();
+        // Each placement once, however many repetitions it ran.
+        let placement = record.placement_label();
+        if !who.contains(&placement) {
+            who.push(placement);
+        }
     }
     let mut out = String::new();
     for (setup, hashes) in setups.values() {

@@ -13,7 +13,7 @@ pub enum BackendKind {
     Serial,
     // A rayon pool of threads in one process.
     Rayon,
-    // MPI ranks, one thread each.
+    // MPI ranks, each stepping on one thread or on a team of them (`--threads`).
     Mpi,
 }
 

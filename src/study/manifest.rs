@@ -12,7 +12,7 @@ use std::time::Duration;
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::run::backend_kind::BackendKind;
+use crate::run::backend_kind::{BackendKind, Placement};
 use crate::run::limits::{Machine, WorkerSource, check_memory, check_workers};
 use crate::run::overrides::{Overrides, SweepLists, SweptList};
 use crate::run::scene_file;
@@ -50,7 +50,8 @@ impl Study {
 pub enum Scaling {
     /// The same n for every worker count.
     Strong,
-    /// n = (the swept or scene n) × workers: the work per worker stays fixed.
+    /// n = (the swept or scene n) × workers (threads, ranks, or ranks × threads per
+    /// rank): the work per worker stays fixed.
     Weak,
 }
 
@@ -84,6 +85,9 @@ pub struct Configuration {
     pub workers: usize,
     /// Nodes the ranks spread over (`[placement] nodes`; 1 unless MPI).
     pub nodes: usize,
+    /// Threads each MPI rank steps on (`[placement] threads`); 1 for serial and rayon,
+    /// whose threads are their `workers`.
+    pub threads_per_rank: usize,
     /// Run worker counts above the ceiling of [`crate::run::limits`] (`[backends]
     /// oversubscribe = true`); not part of the key.
     pub oversubscribe: bool,
@@ -94,9 +98,10 @@ pub struct Configuration {
     pub footprint: Footprint,
 }
 
-/// The entries of a configuration's key that place its runs (backend, workers) rather
-/// than say what they compute: a record's setup is its key without them.
-pub const PLACEMENT_KEYS: [&str; 3] = ["backend=", "workers=", "nodes="];
+/// The entries of a configuration's key that place its runs (backend, workers, nodes,
+/// threads per rank) rather than say what they compute: a record's setup is its key
+/// without them.
+pub const PLACEMENT_KEYS: [&str; 4] = ["backend=", "workers=", "nodes=", "threads="];
 
 impl Configuration {
     /// A stable text key naming the configuration: the same in every run of the same
@@ -112,14 +117,19 @@ impl Configuration {
                 when_set.push_str(&format!(";{name}={value}"));
             }
         }
-        let [backend, workers, nodes] = PLACEMENT_KEYS;
-        // One node is left out, so that keys written before placements still resume.
+        let [backend, workers, nodes, threads] = PLACEMENT_KEYS;
+        // One node and one thread per rank are left out, so that keys written before
+        // placements (and before threaded ranks) still resume.
         let nodes = match self.nodes {
             1 => String::new(),
             count => format!(";{nodes}{count}"),
         };
+        let threads = match self.threads_per_rank {
+            1 => String::new(),
+            count => format!(";{threads}{count}"),
+        };
         format!(
-            "scene={};{};{backend}{};{workers}{}{nodes}{when_set}",
+            "scene={};{};{backend}{};{workers}{}{nodes}{threads}{when_set}",
             self.scene,
             always.join(";"),
             self.backend.name(),
@@ -127,9 +137,18 @@ impl Configuration {
         )
     }
 
+    /// Its runs' ranks, and the threads each steps on.
+    pub fn placement(&self) -> Placement {
+        let placement = self.backend.placement(self.workers);
+        Placement {
+            threads: placement.threads * self.threads_per_rank,
+            ..placement
+        }
+    }
+
     /// Where its runs' ranks and threads go: nodes × ranks × threads.
     pub fn layout(&self) -> crate::cluster::placement::Layout {
-        let placement = self.backend.placement(self.workers);
+        let placement = self.placement();
         crate::cluster::placement::Layout {
             nodes: self.nodes,
             ranks: placement.ranks,
@@ -154,6 +173,9 @@ impl Configuration {
         }
         if self.nodes > 1 {
             args.extend(["--nodes".to_owned(), self.nodes.to_string()]);
+        }
+        if self.threads_per_rank > 1 {
+            args.extend(["--threads".to_owned(), self.threads_per_rank.to_string()]);
         }
         if self.oversubscribe {
             args.push("--oversubscribe".to_owned());
@@ -192,7 +214,8 @@ struct RawManifest {
 struct RawPlacement {
     #[serde(default = "one")]
     nodes: Vec<i64>,
-    /// Threads per rank: the hybrid backend is not built yet, so 1 only.
+    /// Threads each MPI rank steps on (serial and rayon configurations are not
+    /// multiplied by it).
     #[serde(default = "one")]
     threads: Vec<i64>,
 }
@@ -376,16 +399,16 @@ fn configurations(
             "`scenes` is empty; add a [[scenes]] entry with `file = ...` or inline tables".into(),
         ));
     }
-    let n_nodes = raw
-        .placement
-        .as_ref()
-        .map_or(1, |p| p.get_ref().nodes.len().max(1));
-    let n_configurations = raw.scenes.get_ref().len() * points.len() * backends.len() * n_nodes;
+    let n_placements = raw.placement.as_ref().map_or(1, |p| {
+        p.get_ref().nodes.len().max(1) * p.get_ref().threads.len().max(1)
+    });
+    let n_configurations =
+        raw.scenes.get_ref().len() * points.len() * backends.len() * n_placements;
     check_study_size(at, raw, n_configurations, &repetitions)?;
     let folder = at.path.parent().unwrap_or(Path::new("."));
     let mut configurations = Vec::new();
     let mut seen = BTreeSet::new();
-    let placed = placed(at, raw, &backends)?;
+    let placed = placed(at, raw, &backends, machine)?;
     for entry in raw.scenes.get_ref() {
         let offset = entry.span().start;
         if let Some(name) = &entry.get_ref().name {
@@ -396,12 +419,13 @@ fn configurations(
         let (scene, input) =
             scene_input(entry.get_ref(), folder).map_err(|message| at.invalid(offset, message))?;
         for point in &points {
-            for &(backend, workers, nodes) in &placed {
+            for &(backend, workers, nodes, threads_per_rank) in &placed {
                 let mut overrides = point.clone();
                 if scaling == Scaling::Weak {
-                    let n = weak_n(&input, &overrides, workers).map_err(|message| {
-                        at.invalid(offset, format!("scene `{scene}`: {message}"))
-                    })?;
+                    // Per worker: an MPI rank of 2 threads gets twice the disks of one of 1.
+                    let n = weak_n(&input, &overrides, workers * threads_per_rank).map_err(
+                        |message| at.invalid(offset, format!("scene `{scene}`: {message}")),
+                    )?;
                     overrides.n = Some(n);
                 }
                 let footprint = checked(
@@ -420,6 +444,7 @@ fn configurations(
                     backend,
                     workers,
                     nodes,
+                    threads_per_rank,
                     oversubscribe: raw.backends.get_ref().oversubscribe,
                     repetitions: repetitions[backend as usize],
                     footprint,
@@ -440,39 +465,35 @@ fn configurations(
     Ok(configurations)
 }
 
-/// Each (backend, workers) with the node counts of `[placement]`: MPI ranks on each count
-/// that divides them evenly, every other backend on one node; threads per rank above 1
-/// are refused until the hybrid backend exists.
+/// Each (backend, workers) with the node counts and threads per rank of `[placement]`:
+/// MPI ranks on each node count that divides them evenly, each stepping on each thread
+/// count (ranks × threads within the worker ceiling of `machine` unless `oversubscribe`);
+/// every other backend on one node, its threads its workers.
 fn placed(
     at: &Locator,
     raw: &RawManifest,
     backends: &[(BackendKind, usize)],
-) -> Result<Vec<(BackendKind, usize, usize)>, ManifestError> {
+    machine: &Machine,
+) -> Result<Vec<(BackendKind, usize, usize, usize)>, ManifestError> {
     let Some(placement) = &raw.placement else {
-        return Ok(backends.iter().map(|&(b, w)| (b, w, 1)).collect());
+        return Ok(backends.iter().map(|&(b, w)| (b, w, 1, 1)).collect());
     };
     let offset = placement.span().start;
     let (nodes, threads) = (&placement.get_ref().nodes, &placement.get_ref().threads);
-    if nodes.is_empty() || nodes.iter().any(|&n| n < 1) || threads.is_empty() {
+    if [nodes, threads]
+        .iter()
+        .any(|list| list.is_empty() || list.iter().any(|&count| count < 1))
+    {
         return Err(at.invalid(
             offset,
             "`placement.nodes` and `placement.threads` each list whole numbers of at least 1"
                 .into(),
         ));
     }
-    if threads.iter().any(|&t| t != 1) {
-        return Err(at.invalid(
-            offset,
-            "`placement.threads` asks for more than one thread per MPI rank, and the hybrid \
-             backend (ranks × threads) is not built yet: each rank steps on one thread; use \
-             `threads = [1]`, or rayon's threads in one process (`rayon = [...]`)"
-                .into(),
-        ));
-    }
     let mut placed = Vec::new();
     for &(backend, workers) in backends {
         if !backend.capabilities().mpi {
-            placed.push((backend, workers, 1));
+            placed.push((backend, workers, 1, 1));
             continue;
         }
         for &count in nodes {
@@ -486,7 +507,23 @@ fn placed(
                     ),
                 ));
             }
-            placed.push((backend, workers, count));
+            for &per_rank in threads {
+                let per_rank = per_rank as usize;
+                let source = WorkerSource {
+                    field: &format!(
+                        "`backends.mpi` = {workers} × `placement.threads` = {per_rank}"
+                    ),
+                    insist: "set `oversubscribe = true` in [backends]",
+                };
+                check_workers(
+                    workers.saturating_mul(per_rank),
+                    machine,
+                    raw.backends.get_ref().oversubscribe,
+                    source,
+                )
+                .map_err(|message| at.invalid(offset, message))?;
+                placed.push((backend, workers, count, per_rank));
+            }
         }
     }
     Ok(placed)
@@ -509,7 +546,7 @@ fn check_study_size(
         raw.scenes.span().start,
         format!(
             "the study has {n_configurations} configurations (scenes × sweep points × \
-             backends) of up to {most_repetitions} repetitions, up to {n_runs} runs; collide \
+             backends × placements) of up to {most_repetitions} repetitions, up to {n_runs} runs; collide \
              runs at most {MAX_CONFIGURATIONS} configurations and {MAX_RUNS} runs in a study: \
              sweep fewer values, lower `repetitions`, or split the study"
         ),
@@ -907,34 +944,77 @@ mod tests {
     }
 
     #[test]
-    fn placements_spread_mpi_ranks_over_nodes_and_refuse_threads_per_rank() {
-        let placed = study("[backends]\nserial = true\nmpi = [4]\n[placement]\nnodes = [1, 2]\n");
-        let got: Vec<(String, usize, usize)> = placed
+    fn placements_spread_mpi_ranks_over_nodes_and_threads_per_rank() {
+        let placed = study(
+            "[backends]\nserial = true\nrayon = [2]\nmpi = [4]\n[placement]\nnodes = [1, 2]\n\
+             threads = [1, 2]\n",
+        );
+        let got: Vec<(String, usize, usize, usize)> = placed
             .configurations
             .iter()
-            .map(|c| (c.backend.name().to_owned(), c.workers, c.nodes))
+            .map(|c| {
+                let layout = c.layout();
+                (
+                    c.backend.name().to_owned(),
+                    layout.nodes,
+                    layout.ranks,
+                    layout.threads,
+                )
+            })
             .collect();
+        // Serial and rayon are not multiplied by the threads per rank.
         assert_eq!(
             got,
             [
-                ("serial".into(), 1, 1),
-                ("mpi".into(), 4, 1),
-                ("mpi".into(), 4, 2)
+                ("serial".into(), 1, 1, 1),
+                ("rayon".into(), 1, 1, 2),
+                ("mpi".into(), 1, 4, 1),
+                ("mpi".into(), 1, 4, 2),
+                ("mpi".into(), 2, 4, 1),
+                ("mpi".into(), 2, 4, 2)
             ]
         );
-        // One node keeps the key of studies written before placements.
-        assert!(placed.configurations[1].key().ends_with("workers=4"));
+        let keys: Vec<String> = placed.configurations.iter().map(|c| c.key()).collect();
+        // One node and one thread per rank keep the keys of studies written before.
+        assert!(keys[2].ends_with("backend=mpi;workers=4"), "{keys:?}");
         assert!(
-            placed.configurations[2]
-                .key()
-                .ends_with("workers=4;nodes=2")
+            keys[3].ends_with("backend=mpi;workers=4;threads=2"),
+            "{keys:?}"
         );
-        let args = placed.configurations[2].simulate_args();
+        assert!(keys[4].ends_with("workers=4;nodes=2"), "{keys:?}");
+        assert!(keys[5].ends_with("workers=4;nodes=2;threads=2"), "{keys:?}");
+        let args = placed.configurations[5].simulate_args();
         assert!(args.windows(2).any(|w| w == ["--nodes", "2"]), "{args:?}");
+        assert!(args.windows(2).any(|w| w == ["--ranks", "4"]), "{args:?}");
+        assert!(args.windows(2).any(|w| w == ["--threads", "2"]), "{args:?}");
+        let one_thread = placed.configurations[2].simulate_args();
+        assert!(
+            !one_thread.contains(&"--threads".to_owned()),
+            "{one_thread:?}"
+        );
+        // A site's cores hold ranks × threads.
+        let site = crate::cluster::site::Site {
+            cores_per_node: 4,
+            max_nodes: 2,
+            ..crate::cluster::site::Site::local()
+        };
+        assert_eq!(
+            placed.configurations[2].layout().check(&site, false),
+            Ok(())
+        );
+        let err = placed.configurations[3]
+            .layout()
+            .check(&site, false)
+            .unwrap_err();
+        assert!(err.contains("4 ranks × 2 threads need 8 cores"), "{err}");
         for (bad, says) in [
             ("nodes = [3]", "does not divide the 4 ranks"),
-            ("threads = [2]", "not built yet"),
             ("nodes = [0]", "at least 1"),
+            ("threads = [0]", "at least 1"),
+            (
+                "threads = [5]",
+                "`backends.mpi` = 4 × `placement.threads` = 5 asks for 20 workers",
+            ),
         ] {
             let text = format!("name = \"m\"\n[backends]\nmpi = [4]\n[placement]\n{bad}\n{INLINE}");
             let err = parse(Path::new("m.toml"), &text, &MACHINE)
@@ -942,6 +1022,14 @@ mod tests {
                 .to_string();
             assert!(err.starts_with("m.toml:4: ") && err.contains(says), "{err}");
         }
+    }
+
+    #[test]
+    fn weak_scaling_multiplies_n_by_ranks_times_threads() {
+        let weak =
+            study("scaling = \"weak\"\n[backends]\nmpi = [2]\n[placement]\nthreads = [1, 2]\n");
+        let n: Vec<Option<i64>> = weak.configurations.iter().map(|c| c.overrides.n).collect();
+        assert_eq!(n, [Some(200), Some(400)]);
     }
 
     #[test]

@@ -10,7 +10,7 @@ use polars::prelude::{
     Column, DataFrame, ParquetCompression, ParquetReader, ParquetWriter, PolarsResult, SerReader,
 };
 
-use crate::run::backend_kind::BackendKind;
+use crate::run::backend_kind::{BackendKind, Placement};
 use crate::run::summary::RunSummary;
 use crate::study::environment::Environment;
 use crate::study::manifest::{PLACEMENT_KEYS, Scaling};
@@ -120,7 +120,8 @@ pub struct RecordContext<'a> {
     /// `strong` or `weak`.
     pub scaling: &'a str,
     pub backend: BackendKind,
-    pub workers: u64,
+    /// Its ranks and the threads each steps on.
+    pub placement: Placement,
     pub repetition: u32,
     pub environment: &'a Environment,
     pub study_started_utc: &'a str,
@@ -145,7 +146,7 @@ impl Record {
     /// or null in every column of the run.
     fn blank(context: &RecordContext<'_>, status: &str, error: String) -> Record {
         let env = context.environment;
-        let placement = context.backend.placement(context.workers as usize);
+        let placement = context.placement;
         let (threads, ranks) = (placement.threads as u64, placement.ranks as u64);
         let workers = placement.workers() as u64;
         Record {
@@ -338,6 +339,31 @@ impl Record {
         }
     }
 
+    /// The threads each MPI rank stepped on, which tell a backend's scaling curves apart
+    /// (2 ranks × 2 threads is not 4 ranks × 1); 1 for serial and rayon, whose threads are
+    /// their workers.
+    pub fn threads_per_rank(&self) -> u64 {
+        match BackendKind::from_name(&self.backend) {
+            Some(kind) if kind.capabilities().mpi => self.threads,
+            _ => 1,
+        }
+    }
+
+    /// The run's backend and workers in words: `rayon × 4`, `mpi × 4`, or `mpi × 2 ranks
+    /// × 2 threads` for MPI ranks on several threads each.
+    pub fn placement_label(&self) -> String {
+        match self.threads_per_rank() {
+            1 => format!("{} × {}", self.backend, self.workers),
+            per_rank => {
+                let ranks = match self.ranks {
+                    1 => "1 rank".to_owned(),
+                    count => format!("{count} ranks"),
+                };
+                format!("{} × {ranks} × {per_rank} threads", self.backend)
+            }
+        }
+    }
+
     /// Whether the run drew every step offscreen (`draw = true`).
     pub fn drew(&self) -> bool {
         self.draw_s.is_finite()
@@ -376,6 +402,16 @@ impl Record {
             true => None,
             false => at("wall_s", self.wall_s.to_string()),
         }
+    }
+}
+
+/// The name of a backend's scaling curve at `threads_per_rank` ([`Record::threads_per_rank`]):
+/// the backend's name, and the threads of each rank where they are more than one (`mpi,
+/// 2 threads/rank`).
+pub fn curve_label(backend: &str, threads_per_rank: u64) -> String {
+    match threads_per_rank {
+        1 => backend.to_owned(),
+        per_rank => format!("{backend}, {per_rank} threads/rank"),
     }
 }
 
@@ -757,7 +793,7 @@ pub(crate) fn serial_context(environment: &Environment) -> RecordContext<'_> {
         scene_hash: "0123456789abcdef",
         scaling: "strong",
         backend: BackendKind::Serial,
-        workers: 1,
+        placement: Placement::SERIAL,
         repetition: 0,
         environment,
         study_started_utc: "2026-11-22T18:00:00Z",

@@ -402,7 +402,7 @@ impl Sitting<'_> {
             scene_hash: &self.scene_hashes[c],
             scaling: self.study.scaling.name(),
             backend: configuration.backend,
-            workers: configuration.workers as u64,
+            placement: configuration.placement(),
             repetition: rep,
             environment: &self.environment,
             study_started_utc: &self.started_utc,
@@ -731,12 +731,13 @@ fn note_configurations(
     note: &dyn Fn(&str),
 ) {
     for configuration in configurations {
-        if configuration.backend.is_parallel() && configuration.workers > environment.usable_cpus {
+        let workers = configuration.placement().workers();
+        if configuration.backend.is_parallel() && workers > environment.usable_cpus {
             note(&format!(
                 "note: {} is oversubscribed ({} workers on the {} CPUs this study may use); \
                  its rows say so",
                 configuration.key(),
-                configuration.workers,
+                workers,
                 environment.usable_cpus
             ));
         }

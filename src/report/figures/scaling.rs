@@ -180,13 +180,18 @@ pub fn draw_setup(
 }
 
 /// One colour per backend, the same in every figure.
-fn colour(backend: &str) -> RGBColor {
-    match BackendKind::from_name(backend) {
+fn colour(backend: &BackendScaling) -> RGBColor {
+    let base = match BackendKind::from_name(&backend.backend) {
         Some(BackendKind::Serial) => PALETTE[3],
         Some(BackendKind::Rayon) => PALETTE[0],
         Some(BackendKind::Mpi) => PALETTE[1],
         None => PALETTE[2],
-    }
+    };
+    // Each doubling of the threads per rank lightens the backend's colour, so that its
+    // curves stay apart and of one family (darker would run into serial's near-black).
+    let kept = 0.6f64.powi(backend.threads_per_rank.max(1).ilog2() as i32);
+    let light = |channel: u8| (255.0 - (255.0 - f64::from(channel)) * kept).round() as u8;
+    RGBColor(light(base.0), light(base.1), light(base.2))
 }
 
 /// Ticks of a log axis over `low..high`: the first of these mantissas times the powers
@@ -315,7 +320,10 @@ impl Plot<'_> {
             .map_err(|e| anyhow!("{e}"))?;
         chart
             .configure_mesh()
-            .x_desc("workers (threads or ranks, log scale; backends side by side at each count)")
+            .x_desc(
+                "workers (threads, ranks or ranks × threads, log scale; curves side by side at \
+                 each count)",
+            )
             .y_desc(figure.axis(self.setup.scaling))
             .axis_desc_style((FONT, 18))
             .label_style((FONT, 15))
@@ -400,7 +408,7 @@ fn draw_backend<Y: Ranged<ValueType = f64>>(
     backend: &BackendScaling,
     shift: f64,
 ) -> anyhow::Result<()> {
-    let colour = colour(&backend.backend);
+    let colour = colour(backend);
     let points: Vec<(f64, (f64, f64, f64))> = backend
         .points
         .iter()
@@ -414,8 +422,8 @@ fn draw_backend<Y: Ranged<ValueType = f64>>(
         ))
         .map_err(|e| anyhow!("{e}"))?
         .label(match figure {
-            Figure::Drawing => format!("{}: frames/s with drawing", backend.backend),
-            _ => backend.backend.clone(),
+            Figure::Drawing => format!("{}: frames/s with drawing", backend.label()),
+            _ => backend.label(),
         })
         .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2)));
     let beside: Vec<(f64, f64)> = backend
@@ -433,7 +441,7 @@ fn draw_backend<Y: Ranged<ValueType = f64>>(
                 colour.stroke_width(2),
             ))
             .map_err(|e| anyhow!("{e}"))?
-            .label(format!("{}: steps/s without drawing", backend.backend))
+            .label(format!("{}: steps/s without drawing", backend.label()))
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 8, y)], colour.stroke_width(2)));
         chart
             .draw_series(
