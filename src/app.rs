@@ -598,19 +598,22 @@ fn run_mpi(
     Ok(Finished::Launched(launcher::launch(&launch, &forwarded)?))
 }
 
-/// The threads a rank steps on: `--threads`, else [`THREADS_ENV`] (which collide's
-/// launch line sets for every rank it starts), else 1; a bad variable is named as such.
+/// The threads a rank was told to step on: `--threads`, else [`THREADS_ENV`] (which
+/// collide's launch line sets for every rank it starts); `None` when neither says, and
+/// the rank takes its share of its CPUs ([`crate::backend::mpi::run_rank`]). A bad
+/// variable is named as such.
 #[cfg(feature = "mpi")]
-fn rank_threads(given: Option<NonZeroUsize>) -> anyhow::Result<NonZeroUsize> {
+fn rank_threads(given: Option<NonZeroUsize>) -> anyhow::Result<Option<NonZeroUsize>> {
     use crate::cluster::render::THREADS_ENV;
     if let Some(threads) = given {
-        return Ok(threads);
+        return Ok(Some(threads));
     }
     let Some(text) = std::env::var_os(THREADS_ENV) else {
-        return Ok(NonZeroUsize::MIN);
+        return Ok(None);
     };
     text.to_str()
         .and_then(|text| text.trim().parse::<NonZeroUsize>().ok())
+        .map(Some)
         .ok_or_else(|| {
             anyhow::anyhow!(
                 "the environment variable {THREADS_ENV}={text:?} sets the threads of each MPI \

@@ -336,8 +336,9 @@ pub struct SimulateArgs {
     #[arg(long, value_enum, default_value_t = BackendKind::Serial)]
     pub backend: BackendKind,
     /// Threads of the rayon pool (with --backend rayon; default: the usable CPUs), or
-    /// threads each MPI rank steps on (with --backend mpi; default: 1, or under an MPI
-    /// launcher the ranks' RAYON_NUM_THREADS when set). --ranks × --threads CPUs are used.
+    /// threads each MPI rank steps on (with --backend mpi; default: 1 when collide starts
+    /// the ranks; under an MPI launcher, the ranks' RAYON_NUM_THREADS when set, else each
+    /// rank's share of the CPUs it was bound to). --ranks × --threads CPUs are used.
     #[arg(long, value_parser = parse_workers, allow_negative_numbers = true)]
     pub threads: Option<NonZeroUsize>,
     /// MPI ranks to launch (with --backend mpi; default under mpirun: its world size).

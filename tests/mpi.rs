@@ -236,11 +236,18 @@ fn mpi_ranks_of_two_threads_give_the_serial_hash_and_count_their_workers() {
     assert_eq!(placed, [Some(2), Some(2), Some(4)], "{hybrid}");
 }
 
-/// `mpirun -n 2 collide simulate ... --backend mpi` started by hand, with `RAYON_NUM_THREADS`
-/// set to `threads`: its output.
-fn ranks_under_mpirun(threads: &str) -> std::process::Output {
-    std::process::Command::new("mpirun")
-        .args(["-n", "2", "--oversubscribe", "--bind-to", "none"])
+/// `mpirun -n RANKS collide simulate ... --backend mpi` started by hand, unbound, with
+/// `RAYON_NUM_THREADS` set to `threads` (unset for `None`): its output.
+fn ranks_under_mpirun(ranks: usize, threads: Option<&str>) -> std::process::Output {
+    let mut mpirun = std::process::Command::new("mpirun");
+    mpirun
+        .args([
+            "-n",
+            &ranks.to_string(),
+            "--oversubscribe",
+            "--bind-to",
+            "none",
+        ])
         .arg(env!("CARGO_BIN_EXE_collide"))
         .args([
             "simulate",
@@ -251,25 +258,54 @@ fn ranks_under_mpirun(threads: &str) -> std::process::Output {
         .args(["--backend", "mpi", "--json"])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .env("RAYON_NUM_THREADS", threads)
-        .output()
-        .unwrap()
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1");
+    match threads {
+        Some(threads) => mpirun.env("RAYON_NUM_THREADS", threads),
+        None => mpirun.env_remove("RAYON_NUM_THREADS"),
+    };
+    mpirun.output().unwrap()
 }
 
-#[test]
-fn ranks_without_threads_take_rayon_num_threads_and_name_it_when_wrong() {
-    let out = ranks_under_mpirun("2");
-    let stdout = String::from_utf8_lossy(&out.stdout);
+/// The JSON summary rank 0 printed, after checking that the ranks succeeded.
+fn summary_of(out: &std::process::Output) -> serde_json::Value {
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let json: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
+}
+
+/// Told no thread count, an unbound rank takes the CPUs it may run on, shared evenly
+/// with the other ranks of its node.
+#[test]
+fn ranks_told_no_threads_take_their_share_of_the_cpus() {
+    let mask = std::thread::available_parallelism().unwrap().get();
+    let online = std::fs::read_to_string("/sys/devices/system/cpu/online").unwrap();
+    let cores: usize = (online.trim().split(','))
+        .map(|span| match span.split_once('-') {
+            Some((low, high)) => high.parse::<usize>().unwrap() - low.parse::<usize>().unwrap() + 1,
+            None => 1,
+        })
+        .sum();
+    for ranks in [1, 2] {
+        let json = summary_of(&ranks_under_mpirun(ranks, None));
+        let share = mask.min(cores / ranks).max(1);
+        assert_eq!(
+            json["threads"].as_u64(),
+            Some(share as u64),
+            "{ranks} ranks: {json}"
+        );
+    }
+}
+
+#[test]
+fn ranks_without_threads_take_rayon_num_threads_and_name_it_when_wrong() {
+    let json = summary_of(&ranks_under_mpirun(2, Some("2")));
     assert_eq!(json["threads"].as_u64(), Some(2), "{json}");
     assert_eq!(json["workers"].as_u64(), Some(4), "{json}");
-    let out = ranks_under_mpirun("two");
+    let out = ranks_under_mpirun(2, Some("two"));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(

@@ -31,22 +31,27 @@ pub fn run_rank(
     spec: &RunSpec,
     ranks: Option<usize>,
     final_state: FinalState,
-    threads: NonZeroUsize,
+    threads: Option<NonZeroUsize>,
 ) -> Result<Option<RunOutcome>, BackendError> {
     // A rank's threads step its slab; only this thread, the one that starts MPI, calls
     // it (`distributed::run`). The level MPI grants is what any OpenMPI or MPICH build
     // gives at least, and asking for it is what the standard requires of such a rank.
     let (universe, granted) = mpi::initialize_with_threading(mpi::Threading::Funneled)
         .ok_or_else(|| BackendError::Mpi("MPI was already initialised in this process".into()))?;
-    if threads.get() > 1 && granted == mpi::Threading::Single {
-        return Err(BackendError::Mpi(format!(
-            "this MPI library allows one thread per process (MPI_THREAD_SINGLE), and \
-             --threads asks for {threads}; drop --threads or use an MPI built with thread \
-             support"
-        )));
-    }
     let comm = MpiComm {
         world: universe.world(),
+    };
+    let threads = match (threads, granted) {
+        (Some(threads), mpi::Threading::Single) if threads.get() > 1 => {
+            return Err(BackendError::Mpi(format!(
+                "this MPI library allows one thread per process (MPI_THREAD_SINGLE), and \
+                 --threads asks for {threads}; drop --threads or use an MPI built with \
+                 thread support"
+            )));
+        }
+        (Some(threads), _) => threads,
+        (None, mpi::Threading::Single) => NonZeroUsize::MIN,
+        (None, _) => share_of_cpus(&comm),
     };
     // Where the rank may run goes to the launching process.
     eprintln!(
@@ -62,6 +67,17 @@ pub fn run_rank(
         )));
     }
     distributed::run(&comm, spec, final_state, threads)
+}
+
+/// The threads of a rank told no count: the CPUs its mask allows (what the launcher
+/// bound it to: one core, `PE=T` cores, a socket, or the whole node), but no more than
+/// its even share of the node's CPUs among the ranks on the node, so that ranks that
+/// share a mask (a socket, or no binding) do not take the same CPUs; at least one.
+fn share_of_cpus(comm: &MpiComm) -> NonZeroUsize {
+    let on_node = comm.world.split_shared(comm.world.rank()).size().max(1) as usize;
+    let mask = std::thread::available_parallelism().map_or(1, NonZeroUsize::get);
+    let share = crate::system::machine::machine_cores() / on_node;
+    NonZeroUsize::new(mask.min(share)).unwrap_or(NonZeroUsize::MIN)
 }
 
 /// Timed blocks of each size; a size's time is their median (robust to the other
