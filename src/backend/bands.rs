@@ -14,7 +14,7 @@
 use std::ops::Range;
 
 use crate::sim::collision::DiskState;
-use crate::sim::grid::{Contact, StripGrid};
+use crate::sim::grid::{Contact, Entry, StripGrid};
 use crate::sim::neighbours::{DISPLACEMENT_BLOCK, Displacements, PairList, Skin};
 use crate::sim::pieces::{InTurn, MIN_STREAMING_PIECE, Pieces};
 use crate::sim::prefetch::prefetch;
@@ -94,6 +94,21 @@ pub fn largest_displacement_sq(
     } else {
         skin.largest_displacement_sq(particles, domain, &InTurn)
     }
+}
+
+/// Cuts the owned strips (global index 0 first) into the given bands, each with the
+/// global index of its first strip.
+pub fn split_into_bands<'a>(
+    mut strips: &'a mut [Vec<Entry>],
+    bands: &[Range<usize>],
+) -> Vec<(usize, &'a mut [Vec<Entry>])> {
+    let mut slices = Vec::with_capacity(bands.len());
+    for band in bands {
+        let (head, rest) = strips.split_at_mut(band.len());
+        slices.push((band.start, head));
+        strips = rest;
+    }
+    slices
 }
 
 /// One neighbour list per band of strips, and each band's pairs of a step: those of

@@ -22,7 +22,7 @@ use std::ops::{ControlFlow, Range};
 use std::time::Instant;
 
 use crate::backend::bands::{
-    BandLists, ESCAPEES_PER_PIECE, advance_in_pieces, largest_displacement_sq,
+    BandLists, ESCAPEES_PER_PIECE, advance_in_pieces, largest_displacement_sq, split_into_bands,
 };
 use crate::backend::comm::{Communicator, Counting, RankTraffic, Traffic};
 use crate::backend::setup::{self, cut_slabs, owners};
@@ -447,7 +447,8 @@ struct RankState {
     reported_from: Vec<usize>,
     /// When the own disks are next stored in grid order: the scene's schedule.
     reorder: ReorderSchedule,
-    movers: Vec<Mover>,
+    /// Per band: the disks that left their strips in the last refresh.
+    movers: Vec<Vec<Mover>>,
     /// The pairs the bands handed over and those of the escapees; after the split, the
     /// rank's own chains among them, in resolution order.
     crossing: Vec<Contact>,
@@ -797,7 +798,9 @@ impl RankState {
         moved_sq: f64,
         pieces: &impl Pieces,
     ) {
-        let emigrants = timed(&mut stages.broad_phase, || self.refresh(comm.size()));
+        let emigrants = timed(&mut stages.broad_phase, || {
+            self.refresh(comm.size(), pieces)
+        });
         let to_peers = moved_sq.sqrt() < self.layout.height() / self.layout.n_strips as f64;
         let immigrants = timed(&mut stages.communication, || match to_peers {
             true => {
@@ -874,7 +877,7 @@ impl RankState {
         self.n_own = self.particles.len();
         // As at set-up: the strips sorted, the positions recorded for the lists, the
         // disks the rank below sees noted.
-        let none_left = self.refresh(comm.size());
+        let none_left = self.refresh(comm.size(), pieces);
         debug_assert!(none_left.iter().all(Vec::is_empty));
         self.migrate(&[], pieces);
         self.skin.record(&self.particles, pieces);
@@ -934,22 +937,28 @@ impl RankState {
 
     /// Re-sorts the slab after the disks moved; returns, packed per destination rank,
     /// the disks that left it (their slots are freed by [`RankState::migrate`]).
-    fn refresh(&mut self, n_ranks: usize) -> Vec<Vec<f64>> {
-        self.movers.clear();
-        let strips = self.grid.owned_strips_mut();
-        refresh_band(
-            &self.layout,
-            strips,
-            self.slab.start,
-            &self.particles,
-            &mut self.movers,
-        );
-        let staying = self.movers.partition_point(|m| m.strip() < self.slab.start)
-            ..self.movers.partition_point(|m| m.strip() < self.slab.end);
-        receive_band(strips, self.slab.start, &[&self.movers[staying.clone()]]);
+    fn refresh(&mut self, n_ranks: usize, pieces: &impl Pieces) -> Vec<Vec<f64>> {
+        let bands = self.grid.bands(self.n_bands);
+        let (layout, now) = (&self.layout, &self.particles);
+        let mut slices = split_into_bands(self.grid.owned_strips_mut(), &bands);
+        self.movers.resize_with(bands.len(), Vec::new);
+        let mut refreshes: Vec<_> = slices.iter_mut().zip(&mut self.movers).collect();
+        pieces.for_each(&mut refreshes, |((first, band), band_movers)| {
+            // A local: the lengths of the bands' vectors share cache lines.
+            let mut movers = std::mem::take(*band_movers);
+            movers.clear();
+            refresh_band(layout, band, *first, now, &mut movers);
+            **band_movers = movers;
+        });
+        // Each band takes in the disks that moved into its strips from any band; the
+        // disks that left the slab go to their strips' ranks.
+        let movers: Vec<&[Mover]> = self.movers.iter().map(Vec::as_slice).collect();
+        pieces.for_each(&mut slices, |(first, band)| {
+            receive_band(band, *first, &movers)
+        });
         let mut outgoing = vec![Vec::new(); n_ranks];
-        for (pos, mover) in self.movers.iter().enumerate() {
-            if !staying.contains(&pos) {
+        for mover in self.movers.iter().flatten() {
+            if !self.slab.contains(&mover.strip()) {
                 let to = self.owner[mover.strip()];
                 self.particles.pack(mover.idx() as usize, &mut outgoing[to]);
             }
@@ -964,6 +973,7 @@ impl RankState {
         let mut leaving: Vec<u32> = self
             .movers
             .iter()
+            .flatten()
             .filter(|mover| !staying.contains(&mover.strip()))
             .map(Mover::idx)
             .collect();

@@ -16,7 +16,7 @@ use std::ops::{ControlFlow, Range};
 use std::time::Instant;
 
 use crate::backend::bands::{
-    BandLists, ESCAPEES_PER_PIECE, advance_in_pieces, largest_displacement_sq,
+    BandLists, ESCAPEES_PER_PIECE, advance_in_pieces, largest_displacement_sq, split_into_bands,
 };
 use crate::backend::team::{Team, with_team};
 use crate::backend::{
@@ -27,8 +27,8 @@ use crate::draw::offscreen::{Offscreen, draw_step};
 use crate::run::backend_kind::BackendKind;
 use crate::run::spec::RunSpec;
 use crate::sim::grid::{
-    Contact, Entry, Mover, StripGrid, find_contacts_all_pairs_from, order_canonically,
-    receive_band, refresh_band,
+    Contact, Mover, StripGrid, find_contacts_all_pairs_from, order_canonically, receive_band,
+    refresh_band,
 };
 use crate::sim::neighbours::{Skin, with_reorder_scratch};
 use crate::sim::observe::{SeriesRecorder, StateSums, block_end};
@@ -352,19 +352,4 @@ impl ThreadedStepper {
             |_| {},
         );
     }
-}
-
-/// Cuts the owned strips (global index 0 first) into the given bands, each with the
-/// global index of its first strip.
-fn split_into_bands<'a>(
-    mut strips: &'a mut [Vec<Entry>],
-    bands: &[Range<usize>],
-) -> Vec<(usize, &'a mut [Vec<Entry>])> {
-    let mut slices = Vec::with_capacity(bands.len());
-    for band in bands {
-        let (head, rest) = strips.split_at_mut(band.len());
-        slices.push((band.start, head));
-        strips = rest;
-    }
-    slices
 }
