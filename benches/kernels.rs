@@ -262,29 +262,16 @@ fn distributed_step(c: &mut Criterion) {
                     slowdown: InjectedSlowdown::NONE,
                 };
                 let spec = &spec;
-                let wall_s = std::thread::scope(|scope| {
-                    let ranks: Vec<_> = ThreadComm::group(RANKS)
-                        .into_iter()
-                        .map(|comm| {
-                            // One thread per rank: the ranks are the bench's threads.
-                            scope.spawn(move || {
-                                distributed::run(
-                                    &comm,
-                                    spec,
-                                    FinalState::Summed,
-                                    std::num::NonZeroUsize::MIN,
-                                )
-                            })
-                        })
-                        .collect();
-                    let outcomes: Vec<_> = ranks.into_iter().map(|r| r.join()).collect();
-                    outcomes
-                        .into_iter()
-                        .find_map(|outcome| outcome.expect("a rank ran").expect("placed"))
-                        .expect("rank 0 reports")
-                        .summary
-                        .wall_s
+                // One thread per rank: the ranks are the bench's threads.
+                let outcomes = ThreadComm::run_group(RANKS, |comm| {
+                    let one_thread = std::num::NonZeroUsize::MIN;
+                    distributed::run(&comm, spec, FinalState::Summed, one_thread)
                 });
+                let wall_s = (outcomes.into_iter())
+                    .find_map(|outcome| outcome.expect("placed"))
+                    .expect("rank 0 reports")
+                    .summary
+                    .wall_s;
                 Duration::from_secs_f64(wall_s)
             });
         });

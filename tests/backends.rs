@@ -81,18 +81,10 @@ fn ranks_as_threads_give_the_serial_observables() {
         let reference = serial::run(&spec).unwrap().summary;
         for ranks in [1, 2, 3] {
             let spec = &spec;
-            let summary = std::thread::scope(|scope| {
-                let handles: Vec<_> = ThreadComm::group(ranks)
-                    .into_iter()
-                    .map(|comm| {
-                        scope.spawn(move || {
-                            distributed::run(&comm, spec, FinalState::Summed, NonZeroUsize::MIN)
-                        })
-                    })
-                    .collect();
-                let mut outcomes = handles.into_iter().map(|h| h.join().unwrap().unwrap());
-                outcomes.next().unwrap().unwrap().summary
+            let outcomes = ThreadComm::run_group(ranks, |comm| {
+                distributed::run(&comm, spec, FinalState::Summed, NonZeroUsize::MIN).unwrap()
             });
+            let summary = outcomes.into_iter().next().unwrap().unwrap().summary;
             assert_eq!(
                 summary.state_hash, reference.state_hash,
                 "{name}, {ranks} ranks"

@@ -58,22 +58,9 @@ fn mpi_ranks_count_what_they_send_as_ranks_run_as_threads_do() {
     let scene = "experiments/scenes/seed-1000.toml";
     let spec = &scene_file::load(std::path::Path::new(scene), &Overrides::default()).unwrap();
     for ranks in [2, 3] {
-        let outcomes: Vec<_> = std::thread::scope(|scope| {
-            let handles: Vec<_> = ThreadComm::group(ranks)
-                .into_iter()
-                .map(|comm| {
-                    scope.spawn(move || {
-                        distributed::run(
-                            &comm,
-                            spec,
-                            FinalState::Summed,
-                            std::num::NonZeroUsize::MIN,
-                        )
-                        .unwrap()
-                    })
-                })
-                .collect();
-            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        let outcomes = ThreadComm::run_group(ranks, |comm| {
+            let one_thread = std::num::NonZeroUsize::MIN;
+            distributed::run(&comm, spec, FinalState::Summed, one_thread).unwrap()
         });
         let threads = serde_json::to_value(&outcomes[0].as_ref().unwrap().summary).unwrap();
         let mpi = summary(&[

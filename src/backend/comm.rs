@@ -68,6 +68,25 @@ struct Shared {
 }
 
 impl ThreadComm {
+    /// Runs `rank` on each of the `size` ranks of a new group, each on a thread of its
+    /// own, all at once; returns what each returned, in rank order. A panic on a rank is
+    /// raised again here.
+    pub fn run_group<R: Send>(size: usize, rank: impl Fn(ThreadComm) -> R + Sync) -> Vec<R> {
+        let rank = &rank;
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = (ThreadComm::group(size).into_iter())
+                .map(|comm| scope.spawn(move || rank(comm)))
+                .collect();
+            (handles.into_iter())
+                .map(|handle| {
+                    handle
+                        .join()
+                        .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+                })
+                .collect()
+        })
+    }
+
     /// The `size` ranks of a new group.
     pub fn group(size: usize) -> Vec<ThreadComm> {
         let shared = Arc::new(Shared {

@@ -1210,6 +1210,17 @@ mod tests {
         }
     }
 
+    /// The inelastic gas of [`spec`] falling under gravity into a pile that comes to
+    /// rest on the floor.
+    fn pile() -> RunSpec {
+        let mut pile = spec(Boundary::Walls, 0.5, 0.3);
+        if let SceneSource::Gas(gas) = &mut pile.scene {
+            gas.physics.gravity = Some([0.0, -1.0]);
+        }
+        pile.method = MethodSpec::stepped(0.05, 600, Broadphase::Grid);
+        pile
+    }
+
     fn run_on_threads(spec: &RunSpec, ranks: usize) -> RunOutcome {
         run_on_threads_with(spec, ranks, 1, FinalState::Summed)
     }
@@ -1222,12 +1233,8 @@ mod tests {
         final_state: FinalState,
     ) -> RunOutcome {
         let threads = NonZeroUsize::new(threads).unwrap();
-        let outcomes: Vec<Option<RunOutcome>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = ThreadComm::group(ranks)
-                .into_iter()
-                .map(|comm| scope.spawn(move || run(&comm, spec, final_state, threads).unwrap()))
-                .collect();
-            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        let outcomes = ThreadComm::run_group(ranks, |comm| {
+            run(&comm, spec, final_state, threads).unwrap()
         });
         assert!(outcomes[1..].iter().all(Option::is_none));
         outcomes.into_iter().next().unwrap().unwrap()
@@ -1271,12 +1278,7 @@ mod tests {
     /// inelastic, dilute and dense, unequal disks, and a pile under gravity.
     #[test]
     fn ranks_of_several_threads_give_the_serial_hash() {
-        let mut pile = spec(Boundary::Walls, 0.5, 0.3);
-        if let SceneSource::Gas(gas) = &mut pile.scene {
-            gas.physics.gravity = Some([0.0, -1.0]);
-        }
-        pile.method = MethodSpec::stepped(0.05, 600, Broadphase::Grid);
-        let mut cases = vec![("pile", pile)];
+        let mut cases = vec![("pile", pile())];
         for boundary in [Boundary::Walls, Boundary::Periodic] {
             for (restitution, packing) in [(1.0, 0.05), (0.8, 0.35)] {
                 cases.push(("gas", spec(boundary, restitution, packing)));
@@ -1315,11 +1317,7 @@ mod tests {
 
     #[test]
     fn ranks_as_threads_give_the_serial_hash_for_a_pile_resting_under_gravity() {
-        let mut spec = spec(Boundary::Walls, 0.5, 0.3);
-        if let SceneSource::Gas(gas) = &mut spec.scene {
-            gas.physics.gravity = Some([0.0, -1.0]);
-        }
-        spec.method = MethodSpec::stepped(0.05, 600, Broadphase::Grid);
+        let spec = pile();
         let reference = serial::run(&spec).unwrap().summary;
         assert!(reference.max_wall_penetration > 0.0);
         for ranks in [2, 8] {
@@ -1659,18 +1657,9 @@ mod tests {
                 .all(|w| w[0].end == w[1].start && !w[1].is_empty())
         );
         let spec = &spec;
-        let errors: Vec<String> = std::thread::scope(|scope| {
-            let handles: Vec<_> = ThreadComm::group(layout.n_strips + 1)
-                .into_iter()
-                .map(|comm| {
-                    scope.spawn(move || {
-                        run(&comm, spec, FinalState::Summed, NonZeroUsize::MIN).err()
-                    })
-                })
-                .collect();
-            (handles.into_iter())
-                .map(|handle| handle.join().unwrap().expect("refused").to_string())
-                .collect()
+        let errors = ThreadComm::run_group(layout.n_strips + 1, |comm| {
+            let refused = run(&comm, spec, FinalState::Summed, NonZeroUsize::MIN).err();
+            refused.expect("refused").to_string()
         });
         assert!(
             errors.iter().all(|error| error.contains("use at most")),
