@@ -34,6 +34,11 @@ pub fn advance_in_pieces(
     skin: &mut Skin,
     pieces: &impl Pieces,
 ) -> StepCounters {
+    if pieces.workers() == 1 {
+        let n_particles = particles.len();
+        let tracking = skin.tracking(n_particles);
+        return advance_disks(domain, physics, dt, particles.disk_slices_mut(), tracking);
+    }
     let chunk = pieces.piece_len(particles.len(), MIN_STREAMING_PIECE, DISPLACEMENT_BLOCK);
     let n_chunks = particles.len().div_ceil(chunk);
     let displacements: Vec<Option<Displacements>> = match skin.tracking(particles.len()) {
@@ -184,8 +189,9 @@ impl BandLists {
         self.handed_over.resize_with(n_lists, Vec::new);
         self.schedules
             .resize_with(n_lists, ContactSchedule::default);
-        let in_first_strips = &self.in_first_strips;
-        let pinned = |disk: u32| in_first_strips.contains(disk) || pinned(disk);
+        // With one band no disk is in two bands' lists.
+        let (in_first_strips, several) = (&self.in_first_strips, n_lists > 1);
+        let pinned = |disk: u32| (several && in_first_strips.contains(disk)) || pinned(disk);
         let mut bands: Vec<_> = self
             .lists
             .iter()

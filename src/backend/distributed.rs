@@ -1098,8 +1098,8 @@ impl RankState {
             |disk: u32| disk as usize >= n_own || exported.contains(disk) || sent.contains(disk);
         // A disk in an escapee's pair may be in a band's pairs too: the band hands its
         // chain over, to be put together with the escapee's.
-        let touched = &self.touched;
-        let pinned = |disk: u32| touched[disk as usize] || seen_elsewhere(disk);
+        let (touched, any_touched) = (&self.touched, !escaped.is_empty());
+        let pinned = |disk: u32| (any_touched && touched[disk as usize]) || seen_elsewhere(disk);
         self.crossing.clear();
         (self.bands).find_contacts(particles, &self.domain, pinned, &mut self.crossing, pieces);
         self.crossing.extend_from_slice(&escaped);
