@@ -3,13 +3,16 @@
 //!
 //! Each rank owns a slab of whole strips (cut so that the initial disks are shared out
 //! evenly; counts need not divide the box) and talks in a step to its peers, the ranks
-//! beside it. Per step a rank moves its disks, and the ranks decide together, in one
-//! small all-reduce, whether to rebuild their lists: then each refreshes its strips and
-//! hands the disks that left its slab to their new owners (migration); otherwise the
-//! disks that escaped the lists are served by queries, on every peer whose strips they
-//! may reach. Each rank sends the disks of its first strip to the rank below as ghosts
-//! (halo), and finds the pairs its strips scan (its last strip scans the ghosts above
-//! it). Chains of contacts with no ghost, no other rank's escapee and no disk another
+//! beside it. Per step a rank moves its disks and, on the steps the ranks foresaw
+//! together at the last step, rebuilds its lists: it refreshes its strips and hands the
+//! disks that left its slab to their new owners (migration); otherwise the disks that
+//! escaped the lists are served by queries, on every peer whose strips they may reach.
+//! Each rank sends the disks of its first strip to the rank below as ghosts (halo), with
+//! its reported escapees to every peer, and finds the pairs its strips scan (its last
+//! strip scans the ghosts above it). One small all-reduce per step tells every rank
+//! whether a disk went further than foreseen (then the ranks find the step's contacts
+//! again, on rebuilt lists), whether a shared chain reached past a rank's peers, and
+//! what to foresee for the next step. Chains of contacts with no ghost, no other rank's escapee and no disk another
 //! rank sees (exported or reported) are the rank's alone and resolved there, in
 //! canonical order. Every other chain may span ranks: the ranks that hold it resolve it,
 //! in canonical order, from their own and their peers' contacts (`backend::shared`), or,
@@ -536,14 +539,33 @@ struct OwnEscapees {
     crowded_next: bool,
 }
 
-/// What a rank received in a step's swap with its peers ([`RankState::swap_halo`]).
+/// What a rank received in a step's swap with its peers ([`RankState::swap_halo`]):
+/// one message from each peer, in the peers' order, and the farthest a disk of this
+/// rank or of a peer may have moved since the build.
 struct Swapped {
-    /// The ghosts from the rank above, packed (empty when there is none).
-    ghosts: Vec<f64>,
-    /// The escapees each peer reported, packed, in the peers' order.
-    reports: Vec<Vec<f64>>,
-    /// How far a disk of this rank or of a peer may have moved since the build.
+    messages: Vec<Vec<f64>>,
+    /// Which message holds the ghosts from the rank above, if there is one.
+    from_above: Option<usize>,
     moved: f64,
+}
+
+impl Swapped {
+    /// A message's ghosts, packed, and the escapees its sender reported.
+    fn split(message: &[f64]) -> (&[f64], &[f64]) {
+        message[HALO_HEAD..].split_at(message[0] as usize)
+    }
+
+    /// The ghosts from the rank above, packed (empty when there is none).
+    fn ghosts(&self) -> &[f64] {
+        (self.from_above).map_or(&[], |at| Swapped::split(&self.messages[at]).0)
+    }
+
+    /// The escapees each peer reported, packed, in the peers' order.
+    fn reports(&self) -> Vec<&[f64]> {
+        (self.messages.iter())
+            .map(|message| Swapped::split(message).1)
+            .collect()
+    }
 }
 
 /// A rank's shared contacts of a step, sent to its peers, and what it made of its
@@ -558,8 +580,9 @@ struct SharedStep {
 /// values, and how far the sender's disks may have moved.
 const HALO_HEAD: usize = 2;
 
-/// How many steps' growth ahead a rank looks when it foresees a rebuild
-/// ([`RankState::foresee_rebuild`]).
+/// What a rank foresees the next step to add to the farthest displacement and to its
+/// escapees, in multiples of what the last step added ([`RankState::foresee_rebuild`]):
+/// twice, a margin for disks that speed up.
 const FORESIGHT: f64 = 2.0;
 
 /// The ranks owning the strips within [`PEER_STRIPS`] of `slab`, but `me`, in rank
@@ -1028,7 +1051,7 @@ impl RankState {
         self.redistribute(comm, &mut untimed, false, pieces);
         debug_assert!(self.held.iter().all(Vec::is_empty));
         let swapped = self.swap_halo(comm, false);
-        self.take_ghosts(swapped.ghosts, true, pieces);
+        self.take_ghosts(swapped.ghosts(), true, pieces);
         // The first step brings the ghosts again, in the same order.
         self.particles.truncate(self.n_own);
     }
@@ -1190,26 +1213,18 @@ impl RankState {
         let sends: Vec<(usize, &[f64])> = (peers.iter().copied())
             .zip(messages.iter().map(Vec::as_slice))
             .collect();
-        let mut swapped = Swapped {
-            ghosts: Vec::new(),
-            reports: Vec::with_capacity(peers.len()),
+        let messages = comm.send_receive(&sends, peers);
+        let moved = (messages.iter()).fold(moved, |farthest, message| farthest.max(message[1]));
+        Swapped {
+            messages,
+            from_above: (self.ghosts_from).and_then(|above| peers.iter().position(|&p| p == above)),
             moved,
-        };
-        for (&peer, message) in peers.iter().zip(comm.send_receive(&sends, peers)) {
-            let n_ghost_values = message[0] as usize;
-            swapped.moved = swapped.moved.max(message[1]);
-            let (ghosts, reported) = message[HALO_HEAD..].split_at(n_ghost_values);
-            if Some(peer) == self.ghosts_from {
-                swapped.ghosts = ghosts.to_vec();
-            }
-            swapped.reports.push(reported.to_vec());
         }
-        swapped
     }
 
     /// Appends the ghosts after the own disks and, with `rebuild`, rebuilds the bands'
     /// lists with them.
-    fn take_ghosts(&mut self, ghosts: Vec<f64>, rebuild: bool, pieces: &impl Pieces) {
+    fn take_ghosts(&mut self, ghosts: &[f64], rebuild: bool, pieces: &impl Pieces) {
         let n_own = self.particles.len();
         self.n_own = n_own;
         if rebuild {
@@ -1217,8 +1232,8 @@ impl RankState {
             self.escapees.clear();
             self.sent.clear(n_own);
         }
-        self.make_room([ghosts.as_slice()]);
-        self.particles.unpack_append(&ghosts);
+        self.make_room([ghosts]);
+        self.particles.unpack_append(ghosts);
         if rebuild {
             if self.ghosts_from.is_some() {
                 self.grid
@@ -1236,13 +1251,14 @@ impl RankState {
     /// that involve an own disk, and splits them into chains of the rank's own (each
     /// band's, and the crossing ones) and chains to share.
     fn find_contacts(&mut self, swapped: Swapped, rebuild: bool, pieces: &impl Pieces) {
-        self.take_ghosts(swapped.ghosts, rebuild, pieces);
+        self.take_ghosts(swapped.ghosts(), rebuild, pieces);
         self.first_reported = self.particles.len();
         self.reported_from.clear();
-        let queried = !rebuild
-            && (!self.escapees.is_empty() || swapped.reports.iter().any(|r| !r.is_empty()));
+        let reports = swapped.reports();
+        let queried =
+            !rebuild && (!self.escapees.is_empty() || reports.iter().any(|r| !r.is_empty()));
         let escaped = match queried {
-            true => self.find_contacts_of_escapees(&swapped.reports, swapped.moved, pieces),
+            true => self.find_contacts_of_escapees(&reports, swapped.moved, pieces),
             false => Vec::new(),
         };
         self.touched.resize(self.particles.len(), false);
@@ -1284,12 +1300,12 @@ impl RankState {
     /// paired with itself.
     fn find_contacts_of_escapees(
         &mut self,
-        reports: &[Vec<f64>],
+        reports: &[&[f64]],
         moved: f64,
         pieces: &impl Pieces,
     ) -> Vec<Contact> {
         let first_reported = self.particles.len();
-        self.make_room(reports.iter().map(Vec::as_slice));
+        self.make_room(reports.iter().copied());
         for (report, &from) in reports.iter().zip(self.hood.peers()) {
             self.particles.unpack_append(report);
             let n_disks = report.len() / PACKED_LEN;
