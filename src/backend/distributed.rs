@@ -1733,16 +1733,25 @@ mod tests {
         }
     }
 
-    /// A fast disk of one rank's slab, two strips above the boundary, escapes the lists
-    /// and meets a slow disk of the rank below before the lists are rebuilt. Neither
-    /// rank's list holds the pair, and neither rank holds both disks: only the escapee's
-    /// report to the rank below finds it, as the serial stepper's query does.
-    #[test]
-    fn an_escapee_meets_a_disk_of_the_rank_below_as_in_the_serial_run() {
+    /// Ten columns of unit disks at rest, `rows` of them.
+    struct Lattice {
+        first: [f64; 2],
+        spacing: [f64; 2],
+        rows: usize,
+    }
+
+    /// A walled box of `size` holding `lattice` and unit disks moving up or down
+    /// (`movers`: x, y, vy), stepped `steps` times by dt = 0.05.
+    fn lattice_with_movers(
+        lattice: Lattice,
+        movers: &[[f64; 3]],
+        size: [f64; 2],
+        steps: u64,
+    ) -> RunSpec {
         use crate::sim::Scene;
         use crate::sim::particles::Disk;
         use crate::sim::scene::Domain;
-        let disk = |x: f64, y: f64, vy: f64| Disk {
+        let disk = |[x, y, vy]: [f64; 3]| Disk {
             x,
             y,
             vx: 0.0,
@@ -1750,35 +1759,56 @@ mod tests {
             radius: 0.5,
             mass: 1.0,
         };
-        // Disks at rest on the left, so that the escapee is one of few (the lists then
-        // serve it by queries); skin 12·|v|·dt = 0.6, strips 1.6 tall; the ranks meet
-        // at y = 19.2, with the slow disk in the strip below and the fast one in the
-        // second strip above.
-        let mut disks: Vec<Disk> = (0..100)
-            .map(|k| {
-                disk(
-                    1.5 + 2.0 * (k % 10) as f64,
-                    1.5 + 3.8 * (k / 10) as f64,
-                    0.0,
-                )
-            })
-            .collect();
-        disks.push(disk(30.0, 19.1, 0.45));
-        disks.push(disk(30.0, 20.9, -1.0));
+        let Lattice {
+            first,
+            spacing,
+            rows,
+        } = lattice;
+        let at_rest = (0..10 * rows).map(|k| {
+            let (column, row) = ((k % 10) as f64, (k / 10) as f64);
+            [
+                first[0] + spacing[0] * column,
+                first[1] + spacing[1] * row,
+                0.0,
+            ]
+        });
+        let disks: Vec<Disk> = at_rest.chain(movers.iter().copied()).map(disk).collect();
         let scene = Scene {
             domain: Domain {
-                width: 40.0,
-                height: 40.0,
+                width: size[0],
+                height: size[1],
                 boundary: Boundary::Walls,
             },
             physics: Physics::with_restitution(1.0),
             particles: Particles::from_disks(&disks),
         };
-        let spec = RunSpec {
+        RunSpec {
             scene: SceneSource::Explicit(scene),
-            method: MethodSpec::stepped(0.05, 20, Broadphase::Grid),
+            method: MethodSpec::stepped(0.05, steps, Broadphase::Grid),
             slowdown: InjectedSlowdown::NONE,
-        };
+        }
+    }
+
+    /// A fast disk of one rank's slab, two strips above the boundary, escapes the lists
+    /// and meets a slow disk of the rank below before the lists are rebuilt. Neither
+    /// rank's list holds the pair, and neither rank holds both disks: only the escapee's
+    /// report to the rank below finds it, as the serial stepper's query does.
+    #[test]
+    fn an_escapee_meets_a_disk_of_the_rank_below_as_in_the_serial_run() {
+        // Disks at rest on the left, so that the escapee is one of few (the lists then
+        // serve it by queries); skin 12·|v|·dt = 0.6, strips 1.6 tall; the ranks meet
+        // at y = 19.2, with the slow disk in the strip below and the fast one in the
+        // second strip above.
+        let spec = lattice_with_movers(
+            Lattice {
+                first: [1.5, 1.5],
+                spacing: [2.0, 3.8],
+                rows: 10,
+            },
+            &[[30.0, 19.1, 0.45], [30.0, 20.9, -1.0]],
+            [40.0, 40.0],
+            20,
+        );
         let reference = serial::run(&spec).unwrap().summary;
         assert_eq!(reference.pair_collisions, 1, "the two disks meet");
         let summary = run_on_threads(&spec, 2).summary;
@@ -1793,43 +1823,18 @@ mod tests {
     /// serial run's; the second looks show as collectives beyond one per step.
     #[test]
     fn a_disk_that_crosses_slabs_in_a_step_gives_the_serial_hash() {
-        use crate::sim::Scene;
-        use crate::sim::particles::Disk;
-        use crate::sim::scene::Domain;
-        let disk = |x: f64, y: f64, vy: f64| Disk {
-            x,
-            y,
-            vx: 0.0,
-            vy,
-            radius: 0.5,
-            mass: 1.0,
-        };
-        let mut disks: Vec<Disk> = (0..160)
-            .map(|k| {
-                disk(
-                    1.0 + 2.0 * (k % 10) as f64,
-                    1.0 + 4.0 * (k / 10) as f64,
-                    0.0,
-                )
-            })
-            .collect();
         // Off the lattice's columns: it bounces between the walls, 15 a step, until a
         // wall sends it into a disk.
-        disks.push(disk(20.5, 30.0, 300.0));
-        let scene = Scene {
-            domain: Domain {
-                width: 22.0,
-                height: 64.0,
-                boundary: Boundary::Walls,
+        let spec = lattice_with_movers(
+            Lattice {
+                first: [1.0, 1.0],
+                spacing: [2.0, 4.0],
+                rows: 16,
             },
-            physics: Physics::with_restitution(1.0),
-            particles: Particles::from_disks(&disks),
-        };
-        let spec = RunSpec {
-            scene: SceneSource::Explicit(scene),
-            method: MethodSpec::stepped(0.05, 60, Broadphase::Grid),
-            slowdown: InjectedSlowdown::NONE,
-        };
+            &[[20.5, 30.0, 300.0]],
+            [22.0, 64.0],
+            60,
+        );
         let reference = serial::run(&spec).unwrap().summary;
         for ranks in [2, 16] {
             let summary = run_on_threads(&spec, ranks).summary;
