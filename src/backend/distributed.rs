@@ -736,7 +736,10 @@ impl RankState {
                 break (all, shared);
             }
             self.particles.truncate(self.n_own);
-            (rebuild, everywhere) = (true, !self.is_within_a_strip(all.moved_sq));
+            // A rebuild fails only on held-back disks, which moved over two strips: the
+            // exchange with every rank that sends them cannot fail again.
+            everywhere = rebuild || !self.is_within_a_strip(all.moved_sq);
+            rebuild = true;
         };
         self.busiest_share = summary.most_disks as f64 * comm.size() as f64 / self.n_disks as f64;
         self.busiest_share_sum += self.busiest_share;
