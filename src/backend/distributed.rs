@@ -12,12 +12,13 @@
 //! strip scans the ghosts above it). One small all-reduce per step tells every rank
 //! whether a disk went further than foreseen (then the ranks find the step's contacts
 //! again, on rebuilt lists), whether a shared chain reached past a rank's peers, and
-//! what to foresee for the next step. Chains of contacts with no ghost, no other rank's escapee and no disk another
-//! rank sees (exported or reported) are the rank's alone and resolved there, in
-//! canonical order. Every other chain may span ranks: the ranks that hold it resolve it,
-//! in canonical order, from their own and their peers' contacts (`backend::shared`), or,
-//! when it reaches past the peers, every rank from all ranks' gathered contacts. So every
-//! chain sees its contacts in the serial order, which is why the bits agree.
+//! what to foresee for the next step. Chains of contacts with no ghost, no other rank's
+//! escapee and no disk another rank sees (exported or reported) are the rank's alone
+//! and resolved there, in canonical order. Every other chain may span ranks: the ranks
+//! that hold it resolve it, in canonical order, from their own and their peers'
+//! contacts (`backend::shared`), or, when it reaches past the peers, every rank from
+//! all ranks' gathered contacts. So every chain sees its contacts in the serial order,
+//! which is why the bits agree.
 
 use std::collections::{HashMap, HashSet};
 use std::num::NonZeroUsize;
@@ -479,8 +480,6 @@ struct RankState {
     rebuild_next: bool,
     last_moved: f64,
     last_escapees: usize,
-    /// How far this rank's farthest disk moved since the build, if one escaped (else 0).
-    moved_here: f64,
     /// Per rank: disks that left the slab for a rank not a peer at a rebuild, held until
     /// the ranks exchange with all others.
     held: Vec<Vec<f64>>,
@@ -674,7 +673,6 @@ impl RankState {
             rebuild_next: false,
             last_moved: 0.0,
             last_escapees: 0,
-            moved_here: 0.0,
             held: Vec::new(),
         }
     }
@@ -712,7 +710,9 @@ impl RankState {
                     timed(&mut stages.communication, || self.rebalance(comm, pieces));
                 }
             }
-            let swapped = timed(&mut stages.communication, || self.swap_halo(comm, !rebuild));
+            let swapped = timed(&mut stages.communication, || {
+                self.swap_halo(comm, (!rebuild).then_some(&own))
+            });
             timed(&mut stages.broad_phase, || {
                 self.find_contacts(swapped, rebuild, pieces)
             });
@@ -1053,7 +1053,7 @@ impl RankState {
         // Every disk starts in its rank's slab.
         self.redistribute(comm, &mut untimed, false, pieces);
         debug_assert!(self.held.iter().all(Vec::is_empty));
-        let swapped = self.swap_halo(comm, false);
+        let swapped = self.swap_halo(comm, None);
         self.take_ghosts(swapped.ghosts(), true, pieces);
         // The first step brings the ghosts again, in the same order.
         self.particles.truncate(self.n_own);
@@ -1084,7 +1084,6 @@ impl RankState {
                 self.sent.insert(idx);
             }
         }
-        self.moved_here = moved_sq.sqrt();
         let n_escapees = self.escapees.len();
         let last = std::mem::replace(&mut self.last_escapees, n_escapees);
         let next = n_escapees + FORESIGHT as usize * n_escapees.saturating_sub(last);
@@ -1191,14 +1190,19 @@ impl RankState {
     }
 
     /// Sends to every peer how far this rank's disks may have moved since the build
-    /// and, with `reports`, the escapees reported to the peers; to the rank below also
-    /// the disks of the slab's first strip, in x order. Returns the ghosts from the rank
-    /// above, what each peer reported, and the farthest any of them or this rank's
-    /// disks may have moved.
-    fn swap_halo<C: Communicator>(&self, comm: &C, reports: bool) -> Swapped {
+    /// and, with `escaped` (the own escapees' summary, on a step without a rebuild), the
+    /// escapees reported to the peers; to the rank below also the disks of the slab's
+    /// first strip, in x order. Returns the ghosts from the rank above, what each peer
+    /// reported, and the farthest any of them or this rank's disks may have moved.
+    fn swap_halo<C: Communicator>(&self, comm: &C, escaped: Option<&OwnEscapees>) -> Swapped {
         // A disk that did not escape moved less than half the skin.
-        let moved = (0.5 * self.skin.width()).max(self.moved_here);
-        let reported: &[f64] = if reports { &self.reported } else { &[] };
+        let moved_sq = escaped.map_or(0.0, |own| own.moved_sq);
+        let moved = (0.5 * self.skin.width()).max(moved_sq.sqrt());
+        let reported: &[f64] = if escaped.is_some() {
+            &self.reported
+        } else {
+            &[]
+        };
         let peers = self.hood.peers();
         let messages: Vec<Vec<f64>> = (peers.iter())
             .map(|&peer| {
