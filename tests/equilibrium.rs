@@ -74,6 +74,15 @@ fn a_run_too_short_to_melt_says_so_instead_of_printing_a_number() {
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(text.contains("not equilibrated: run longer"), "{text}");
     assert!(!text.contains("z-score"), "{text}");
+    // A manual discard averages the run's second half all the same, and is told that
+    // MSER-5 sees the transient go on.
+    let out = collide(&["simulate", &scene, "--discard", "50%"]);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.contains("(manual discard)"), "{text}");
+    assert!(
+        text.contains("warning    MSER-5 finds no end of the transient in the run's first half"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -112,6 +121,26 @@ fn a_manual_discard_sets_the_averaged_window_instead_of_mser5() {
         text.contains("equilibrium cut at t = 1.5300e2 (manual discard)"),
         "{text}"
     );
+    // MSER-5's cut is kept beside a manual one, whichever rule cut, and a discard
+    // shorter than it is flagged: nothing discarded keeps the whole melting.
+    assert_eq!(manual["equilibration_mser5_cut_time"], automatic_cut);
+    assert_eq!(none["equilibration_mser5_cut_time"], automatic_cut);
+    let warning = "which MSER-5 counts as transient";
+    let text = |discard: &str| {
+        String::from_utf8(collide(&["simulate", &scene, "--discard", discard]).stdout).unwrap()
+    };
+    let kept_all = text("0%");
+    assert!(
+        kept_all.contains(&format!(
+            "warning    the discard keeps t = 0.0000e0 to {automatic_cut:.4e}, {warning}"
+        )),
+        "{kept_all}"
+    );
+    // A discard past MSER-5's cut, and MSER-5's own cut, are not flagged.
+    for discard in ["60%", "auto"] {
+        let quiet = text(discard);
+        assert!(!quiet.contains(warning), "{discard}: {quiet}");
+    }
 }
 
 #[test]

@@ -85,6 +85,7 @@ fn summary(backend: &str, threads: usize, ranks: usize, n: usize, wall_s: f64) -
         equilibrated: None,
         equilibration_cut: None,
         equilibration_cut_time: None,
+        equilibration_mser5_cut_time: None,
         compressibility_z_from_zero: None,
         compressibility_z_se: None,
         compressibility_z_g: None,

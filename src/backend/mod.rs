@@ -334,6 +334,7 @@ fn observed_summary(
         equilibrated: observed.map(|o| o.settled.is_some()),
         equilibration_cut: observed.map(|o| o.discard.rule().to_owned()),
         equilibration_cut_time: production.map(|p| p.cut_time),
+        equilibration_mser5_cut_time: observed.and_then(|o| o.mser5_cut_time),
         compressibility_z_from_zero: observed.map(|o| o.from_zero.compressibility_z.mean),
         compressibility_z_se: production.map(|p| p.compressibility_z.se),
         compressibility_z_g: production.map(|p| p.compressibility_z.g),

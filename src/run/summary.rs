@@ -160,6 +160,11 @@ pub struct RunSummary {
     /// Simulated time cut from the start as the transient (null unless equilibrated).
     #[serde(default)]
     pub equilibration_cut_time: Option<f64>,
+    /// Where MSER-5 puts the end of the transient, whichever rule cut (so a manual
+    /// discard can be checked against it): null when it finds none in the run's first
+    /// half, or where no series was recorded.
+    #[serde(default)]
+    pub equilibration_mser5_cut_time: Option<f64>,
     /// Z averaged from t = 0, transient included (null where no series was recorded).
     #[serde(default)]
     pub compressibility_z_from_zero: Option<f64>,
@@ -475,10 +480,28 @@ impl RunSummary {
         }
     }
 
-    /// Sentences flagging an error bar that cannot be trusted: too few independent
-    /// points, or no plateau in the blocking curve.
+    /// Sentences flagging an average or an error bar that cannot be trusted: a manual
+    /// discard shorter than the transient MSER-5 finds, too few independent points, or
+    /// no plateau in the blocking curve.
     pub fn equilibration_warnings(&self) -> Vec<String> {
         let mut warnings = Vec::new();
+        if self.manual_cut()
+            && let Some(cut) = self.equilibration_cut_time
+        {
+            match self.equilibration_mser5_cut_time {
+                Some(transient) if cut < transient => warnings.push(format!(
+                    "the discard keeps t = {cut:.4e} to {transient:.4e}, which MSER-5 counts \
+                     as transient: the averages may carry part of it; discard more, or let MSER-5 cut \
+                     (\"auto\")"
+                )),
+                Some(_) => {}
+                None => warnings.push(
+                    "MSER-5 finds no end of the transient in the run's first half: the \
+                     averages after the discard may carry part of it; run longer"
+                        .to_owned(),
+                ),
+            }
+        }
         if let Some(n_eff) = self.compressibility_z_n_eff
             && n_eff < MIN_EFFECTIVE_POINTS
         {

@@ -69,6 +69,10 @@ pub struct Observed {
     pub settled: Option<Production>,
     /// The rule that chose the cut.
     pub discard: Discard,
+    /// Where MSER-5 puts the end of the transient, whichever rule cut: the simulated
+    /// time, or `None` when it finds none in the run's first half (or the run has too
+    /// few blocks). A manual discard shorter than this may keep part of the transient.
+    pub mser5_cut_time: Option<f64>,
 }
 
 /// The observables over the blocks after a cut.
@@ -93,24 +97,32 @@ pub fn analyse(blocks: &[Block], n: usize, discard: Discard) -> Option<Observed>
     if blocks.len() < 2 || blocks.iter().any(|b| b.kinetic_integral <= 0.0) {
         return None;
     }
-    let start = discard.blocks_dropped(blocks).map_or_else(
-        || {
-            let z: Vec<f64> = blocks
-                .iter()
-                .map(|b| 1.0 + b.virial / (2.0 * b.kinetic_integral))
-                .collect();
-            match mser5(&z) {
-                Cut::At(start) => Some(start),
-                Cut::NotEquilibrated => None,
-            }
-        },
-        |dropped| (blocks.len() - dropped >= MIN_KEPT_BLOCKS).then_some(dropped),
-    );
+    let z: Vec<f64> = blocks
+        .iter()
+        .map(|b| 1.0 + b.virial / (2.0 * b.kinetic_integral))
+        .collect();
+    let mser5_start = match mser5(&z) {
+        Cut::At(start) => Some(start),
+        Cut::NotEquilibrated => None,
+    };
+    let start = match discard.blocks_dropped(blocks) {
+        None => mser5_start,
+        Some(dropped) => (blocks.len() - dropped >= MIN_KEPT_BLOCKS).then_some(dropped),
+    };
     Some(Observed {
         from_zero: production(blocks, 0, n),
         settled: start.map(|start| production(blocks, start, n)),
         discard,
+        mser5_cut_time: mser5_start.map(|start| cut_time(blocks, start)),
     })
+}
+
+/// The simulated time cut when averaging starts at block `start`: the end of the block
+/// before it (0 for the first).
+fn cut_time(blocks: &[Block], start: usize) -> f64 {
+    start
+        .checked_sub(1)
+        .map_or(0.0, |last_cut| blocks[last_cut].end)
 }
 
 /// The observables over `blocks[start..]` (at least two blocks).
@@ -127,9 +139,7 @@ fn production(blocks: &[Block], start: usize, n: usize) -> Production {
         .collect();
     let kinetic_per_disk: Vec<f64> = kept.iter().map(|b| b.kinetic_integral / n).collect();
     Production {
-        cut_time: start
-            .checked_sub(1)
-            .map_or(0.0, |last_cut| blocks[last_cut].end),
+        cut_time: cut_time(blocks, start),
         kept_blocks: kept.len(),
         compressibility_z: Estimate {
             mean: 1.0 + ratio_z.mean,
@@ -187,12 +197,8 @@ mod tests {
         let melting: Vec<f64> = (0..128)
             .map(|k| 4.0 + 5.0 * (-k as f64 / 300.0).exp())
             .collect();
-        assert_eq!(
-            analyse(&blocks(&melting), 10, Discard::Automatic)
-                .unwrap()
-                .settled,
-            None
-        );
+        let melting = analyse(&blocks(&melting), 10, Discard::Automatic).unwrap();
+        assert_eq!((melting.settled, melting.mser5_cut_time), (None, None));
     }
 
     #[test]
@@ -216,6 +222,14 @@ mod tests {
         let observed = analyse(&blocks, 10, Discard::Fraction(0.0)).unwrap();
         assert_eq!(observed.settled, Some(observed.from_zero));
         assert_eq!(observed.discard.rule(), "manual");
+        // MSER-5's own cut is kept beside the manual one, to compare them.
+        assert_eq!(observed.mser5_cut_time, Some(10.0));
+        assert_eq!(
+            analyse(&blocks, 10, Discard::Automatic)
+                .unwrap()
+                .mser5_cut_time,
+            Some(10.0)
+        );
         // A discard that leaves fewer than two blocks (a run cut short) averages nothing.
         for discard in [
             Discard::Time(39.5),
