@@ -58,7 +58,7 @@ pub fn count(
         let scene = runner::materialize_scenes(scene_dir, &[&small])?.remove(0);
         let mut command = vec!["simulate".to_owned(), scene.display().to_string()];
         command.extend(small.simulate_args());
-        let instructions = callgrind(program, &command, kind, small.workers, scene_dir)?;
+        let instructions = callgrind(program, &command, kind, small.layout.ranks, scene_dir)?;
         counts.push(InstructionCount {
             backend: kind.name().to_owned(),
             command,

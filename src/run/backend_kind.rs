@@ -52,6 +52,18 @@ impl BackendKind {
         }
     }
 
+    /// The counts a run placed as `placement` is asked for with: the one its
+    /// [`BackendKind::workers_flag`] sets (rayon's threads, MPI's ranks; 1 for serial),
+    /// and the threads each rank steps on beyond it (`--threads` of MPI ranks; else 1).
+    /// The inverse of [`BackendKind::placement`] on the backend's axis.
+    pub fn counts_of(self, placement: Placement) -> (usize, usize) {
+        match self {
+            BackendKind::Serial => (1, 1),
+            BackendKind::Rayon => (placement.threads, 1),
+            BackendKind::Mpi => (placement.ranks, placement.threads),
+        }
+    }
+
     /// What this backend can run and what it needs.
     pub fn capabilities(self) -> Capabilities {
         match self {

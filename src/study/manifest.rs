@@ -12,6 +12,7 @@ use std::time::Duration;
 use serde::Deserialize;
 use toml::Spanned;
 
+use crate::cluster::placement::Layout;
 use crate::run::backend_kind::{BackendKind, Placement};
 use crate::run::limits::{Machine, WorkerSource, check_memory, check_workers};
 use crate::run::overrides::{Overrides, SweepLists, SweptList};
@@ -81,13 +82,9 @@ pub struct Configuration {
     pub input: SceneInput,
     pub overrides: Overrides,
     pub backend: BackendKind,
-    /// Threads (rayon), ranks (MPI) or 1 (serial).
-    pub workers: usize,
-    /// Nodes the ranks spread over (`[placement] nodes`; 1 unless MPI).
-    pub nodes: usize,
-    /// Threads each MPI rank steps on (`[placement] threads`); 1 for serial and rayon,
-    /// whose threads are their `workers`.
-    pub threads_per_rank: usize,
+    /// Where its runs' ranks and threads go: the backend's own count on its axis (rayon
+    /// threads, MPI ranks), with `[placement]`'s nodes and threads per MPI rank.
+    pub layout: Layout,
     /// Run worker counts above the ceiling of [`crate::run::limits`] (`[backends]
     /// oversubscribe = true`); not part of the key.
     pub oversubscribe: bool,
@@ -118,41 +115,30 @@ impl Configuration {
             }
         }
         let [backend, workers, nodes, threads] = PLACEMENT_KEYS;
+        let (count, threads_per_rank) = self.backend.counts_of(self.placement());
         // One node and one thread per rank are left out, so that keys written before
         // placements (and before threaded ranks) still resume.
-        let nodes = match self.nodes {
+        let nodes = match self.layout.nodes {
             1 => String::new(),
             count => format!(";{nodes}{count}"),
         };
-        let threads = match self.threads_per_rank {
+        let threads = match threads_per_rank {
             1 => String::new(),
             count => format!(";{threads}{count}"),
         };
         format!(
-            "scene={};{};{backend}{};{workers}{}{nodes}{threads}{when_set}",
+            "scene={};{};{backend}{};{workers}{count}{nodes}{threads}{when_set}",
             self.scene,
             always.join(";"),
             self.backend.name(),
-            self.workers
         )
     }
 
     /// Its runs' ranks, and the threads each steps on.
     pub fn placement(&self) -> Placement {
-        let placement = self.backend.placement(self.workers);
         Placement {
-            threads: placement.threads * self.threads_per_rank,
-            ..placement
-        }
-    }
-
-    /// Where its runs' ranks and threads go: nodes × ranks × threads.
-    pub fn layout(&self) -> crate::cluster::placement::Layout {
-        let placement = self.placement();
-        crate::cluster::placement::Layout {
-            nodes: self.nodes,
-            ranks: placement.ranks,
-            threads: placement.threads,
+            ranks: self.layout.ranks,
+            threads: self.layout.threads,
         }
     }
 
@@ -168,14 +154,15 @@ impl Configuration {
                 .filter_map(|(name, value)| Some(format!("--{name}={}", value?))),
         );
         args.extend(["--backend".to_owned(), self.backend.name().to_owned()]);
+        let (count, threads_per_rank) = self.backend.counts_of(self.placement());
         if let Some(flag) = self.backend.workers_flag() {
-            args.extend([flag.to_owned(), self.workers.to_string()]);
+            args.extend([flag.to_owned(), count.to_string()]);
         }
-        if self.nodes > 1 {
-            args.extend(["--nodes".to_owned(), self.nodes.to_string()]);
+        if self.layout.nodes > 1 {
+            args.extend(["--nodes".to_owned(), self.layout.nodes.to_string()]);
         }
-        if self.threads_per_rank > 1 {
-            args.extend(["--threads".to_owned(), self.threads_per_rank.to_string()]);
+        if threads_per_rank > 1 {
+            args.extend(["--threads".to_owned(), threads_per_rank.to_string()]);
         }
         if self.oversubscribe {
             args.push("--oversubscribe".to_owned());
@@ -419,11 +406,11 @@ fn configurations(
         let (scene, input) =
             scene_input(entry.get_ref(), folder).map_err(|message| at.invalid(offset, message))?;
         for point in &points {
-            for &(backend, workers, nodes, threads_per_rank) in &placed {
+            for &(backend, layout) in &placed {
                 let mut overrides = point.clone();
                 if scaling == Scaling::Weak {
                     // Per worker: an MPI rank of 2 threads gets twice the disks of one of 1.
-                    let n = weak_n(&input, &overrides, workers * threads_per_rank).map_err(
+                    let n = weak_n(&input, &overrides, layout.ranks * layout.threads).map_err(
                         |message| at.invalid(offset, format!("scene `{scene}`: {message}")),
                     )?;
                     overrides.n = Some(n);
@@ -434,7 +421,7 @@ fn configurations(
                     offset,
                     (&scene, &input),
                     &overrides,
-                    (backend, workers),
+                    (backend, layout.ranks),
                     machine,
                 )?;
                 let configuration = Configuration {
@@ -442,9 +429,7 @@ fn configurations(
                     input: input.clone(),
                     overrides,
                     backend,
-                    workers,
-                    nodes,
-                    threads_per_rank,
+                    layout,
                     oversubscribe: raw.backends.get_ref().oversubscribe,
                     repetitions: repetitions[backend as usize],
                     footprint,
@@ -465,18 +450,29 @@ fn configurations(
     Ok(configurations)
 }
 
-/// Each (backend, workers) with the node counts and threads per rank of `[placement]`:
-/// MPI ranks on each node count that divides them evenly, each stepping on each thread
-/// count (ranks × threads within the worker ceiling of `machine` unless `oversubscribe`);
-/// every other backend on one node, its threads its workers.
+/// Each (backend, workers) laid out with the node counts and threads per rank of
+/// `[placement]`: MPI ranks on each node count that divides them evenly, each stepping
+/// on each thread count (ranks × threads within the worker ceiling of `machine` unless
+/// `oversubscribe`); every other backend on one node, its threads its workers.
 fn placed(
     at: &Locator,
     raw: &RawManifest,
     backends: &[(BackendKind, usize)],
     machine: &Machine,
-) -> Result<Vec<(BackendKind, usize, usize, usize)>, ManifestError> {
+) -> Result<Vec<(BackendKind, Layout)>, ManifestError> {
+    let on_one_node = |backend: BackendKind, workers, threads_per_rank| {
+        let placement = backend.placement(workers);
+        Layout {
+            nodes: 1,
+            ranks: placement.ranks,
+            threads: placement.threads * threads_per_rank,
+        }
+    };
     let Some(placement) = &raw.placement else {
-        return Ok(backends.iter().map(|&(b, w)| (b, w, 1, 1)).collect());
+        return Ok(backends
+            .iter()
+            .map(|&(b, w)| (b, on_one_node(b, w, 1)))
+            .collect());
     };
     let offset = placement.span().start;
     let (nodes, threads) = (&placement.get_ref().nodes, &placement.get_ref().threads);
@@ -493,7 +489,7 @@ fn placed(
     let mut placed = Vec::new();
     for &(backend, workers) in backends {
         if !backend.capabilities().mpi {
-            placed.push((backend, workers, 1, 1));
+            placed.push((backend, on_one_node(backend, workers, 1)));
             continue;
         }
         for &count in nodes {
@@ -522,7 +518,14 @@ fn placed(
                     source,
                 )
                 .map_err(|message| at.invalid(offset, message))?;
-                placed.push((backend, workers, count, per_rank));
+                let layout = on_one_node(backend, workers, per_rank);
+                placed.push((
+                    backend,
+                    Layout {
+                        nodes: count,
+                        ..layout
+                    },
+                ));
             }
         }
     }
@@ -863,7 +866,7 @@ mod tests {
                     c.overrides.n,
                     c.overrides.packing,
                     c.backend.name().to_owned(),
-                    c.workers,
+                    c.backend.counts_of(c.placement()).0,
                 )
             })
             .collect()
@@ -953,7 +956,7 @@ mod tests {
             .configurations
             .iter()
             .map(|c| {
-                let layout = c.layout();
+                let layout = c.layout;
                 (
                     c.backend.name().to_owned(),
                     layout.nodes,
@@ -998,12 +1001,9 @@ mod tests {
             max_nodes: 2,
             ..crate::cluster::site::Site::local()
         };
-        assert_eq!(
-            placed.configurations[2].layout().check(&site, false),
-            Ok(())
-        );
+        assert_eq!(placed.configurations[2].layout.check(&site, false), Ok(()));
         let err = placed.configurations[3]
-            .layout()
+            .layout
             .check(&site, false)
             .unwrap_err();
         assert!(err.contains("4 ranks × 2 threads need 8 cores"), "{err}");
@@ -1124,7 +1124,7 @@ mod tests {
         let runs: Vec<(BackendKind, usize)> = study
             .configurations
             .iter()
-            .map(|c| (c.backend, c.workers))
+            .map(|c| (c.backend, c.backend.counts_of(c.placement()).0))
             .collect();
         assert_eq!(
             runs,

@@ -216,7 +216,7 @@ fn placed_on_site(
     });
     for configuration in placed {
         configuration
-            .layout()
+            .layout
             .check(&site, configuration.oversubscribe)
             .map_err(|reason| {
                 anyhow!(
@@ -481,7 +481,7 @@ impl Sitting<'_> {
                     workdir,
                     program: &program,
                 };
-                let script = job_script(site, configuration.layout(), &job);
+                let script = job_script(site, configuration.layout, &job);
                 BatchJob { name, script }
             })
             .collect())
