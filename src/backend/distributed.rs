@@ -84,17 +84,7 @@ pub fn run<C: Communicator>(
         slowdown: spec.slowdown,
         setup_start,
     };
-    // The rank's own thread leads its team: MPI is only ever called from it.
-    let (setup_s, seconds, sent_before) = match threads.get() {
-        1 => stepping.run(&mut rank, &mut series, &InTurn, CpuScope::Thread),
-        _ => {
-            let others = NonZeroUsize::new(threads.get() - 1).expect("two threads or more");
-            let members = super::threads::pool(others)?;
-            with_team_beside(&members, |team| {
-                stepping.run(&mut rank, &mut series, team, CpuScope::Process)
-            })
-        }
-    };
+    let (setup_s, seconds, sent_before) = stepping.run_on(threads, &mut rank, &mut series)?;
     let sent = comm.traffic().since(&sent_before);
     let series_parts = series.gather_on_first(comm);
 
@@ -119,14 +109,7 @@ pub fn run<C: Communicator>(
     }
     let mut measured = merge_figures(&all_figures, rank.shared_counters, setup_s, initial);
     measured.accuracy.series = Some(series.merged(&series_parts));
-    measured.balance = (rank.steps > 0).then(|| Balance {
-        imbalance: rank.busiest_share_sum / rank.steps as f64,
-        recuts: rank.recuts,
-        setup_disks_max: (all_figures.iter())
-            .map(|figures| figures[RANK_FIGURES - 1] as u64)
-            .max()
-            .unwrap_or(0),
-    });
+    measured.balance = rank.balance(&all_figures);
     let workers = Workers {
         backend: BackendKind::Mpi,
         threads: threads.get(),
@@ -154,6 +137,25 @@ struct Stepping<'a, C> {
 }
 
 impl<C: Communicator> Stepping<'_, C> {
+    /// [`Stepping::run`] on `threads` threads: the rank's own thread alone, or leading a
+    /// team of the others (MPI is only ever called from it).
+    fn run_on(
+        &self,
+        threads: NonZeroUsize,
+        rank: &mut RankState,
+        series: &mut RankSeries,
+    ) -> Result<(f64, LoopSeconds, Traffic), BackendError> {
+        Ok(match NonZeroUsize::new(threads.get() - 1) {
+            None => self.run(rank, series, &InTurn, CpuScope::Thread),
+            Some(others) => {
+                let members = super::threads::pool(others)?;
+                with_team_beside(&members, |team| {
+                    self.run(rank, series, team, CpuScope::Process)
+                })
+            }
+        })
+    }
+
     /// Builds the rank's lists, then steps it, its pieces of work over `pieces`, and
     /// notes its blocks of the series. Returns the set-up's seconds, the loop's, and
     /// what the rank had sent before the loop.
@@ -604,6 +606,19 @@ fn peers_of(owner: &[usize], slab: &Range<usize>, periodic: bool, me: usize) -> 
 }
 
 impl RankState {
+    /// How evenly the ranks held the disks, from this rank's steps (the same on every
+    /// rank) and every rank's figures; `None` before any step.
+    fn balance(&self, all_figures: &[Vec<f64>]) -> Option<Balance> {
+        (self.steps > 0).then(|| Balance {
+            imbalance: self.busiest_share_sum / self.steps as f64,
+            recuts: self.recuts,
+            setup_disks_max: (all_figures.iter())
+                .map(|figures| figures[RANK_FIGURES - 1] as u64)
+                .max()
+                .unwrap_or(0),
+        })
+    }
+
     /// Sends the own disks, packed, to rank 0 (all ranks call this together): rank 0
     /// gets every rank's in rank order, the others nothing.
     fn gather_on_first<C: Communicator>(&self, comm: &C) -> Vec<Vec<f64>> {

@@ -701,54 +701,13 @@ pub fn markdown(prediction: &Prediction, figure: Option<&str>) -> String {
     if let Some(figure) = figure {
         out += &format!("![measured and modelled efficiency]({figure})\n\n");
     }
-    out += "| part of a step | fitted to the records |\n| --- | --- |\n";
-    out += &format!(
-        "| compute per disk-step | {} |\n",
-        model.compute.describe("s")
-    );
-    out += &format!(
-        "| messages per step, busiest rank (less all-reduce rounds) | {} |\n",
-        model.messages.describe("")
-    );
-    out += &format!(
-        "| bytes per step, busiest rank | {} |\n",
-        model.bytes.describe("B")
-    );
-    out += &format!(
-        "| collectives per step | {:.2}, each ⌈log₂ P⌉ rounds |\n",
-        model.collectives
-    );
-    out += &format!(
-        "| load imbalance | {:.3} (measured {:.3}–{:.3}) |\n\n",
-        model.imbalance.1, model.imbalance.0, model.imbalance.2
-    );
+    out += &fitted_table(model);
     out += &format!(
         "Weak scaling at {} disks per rank, strong scaling of {} disks; efficiency as \
          low–high (middle):\n\n",
         prediction.weak_size, prediction.strong_size
     );
-    out += "| ranks P | weak efficiency | strong efficiency |\n| ---: | ---: | ---: |\n";
-    let shown = [8, 64, 1024, 8192, MAX_RANKS];
-    let cell = |curve: &[Predicted], ranks: u64| {
-        curve
-            .iter()
-            .find(|p| p.ranks == ranks)
-            .map_or("—".to_owned(), |p| {
-                format!(
-                    "{}–{} ({})",
-                    percent(p.low),
-                    percent(p.high),
-                    percent(p.mid)
-                )
-            })
-    };
-    for ranks in shown {
-        out += &format!(
-            "| {ranks} | {} | {} |\n",
-            cell(&prediction.weak, ranks),
-            cell(&prediction.strong, ranks)
-        );
-    }
+    out += &efficiency_table(prediction);
     out += &format!(
         "\nExtrapolation factor: {} predicted ranks / {} measured = {:.0}×. A model fitted \
          on a few ranks of one machine says what its terms imply, not what a cluster will \
@@ -780,6 +739,60 @@ pub fn markdown(prediction: &Prediction, figure: Option<&str>) -> String {
     out
 }
 
+/// What was fitted to the records, part by part of a step.
+fn fitted_table(model: &Model) -> String {
+    let mut out = String::from("| part of a step | fitted to the records |\n| --- | --- |\n");
+    out += &format!(
+        "| compute per disk-step | {} |\n",
+        model.compute.describe("s")
+    );
+    out += &format!(
+        "| messages per step, busiest rank (less all-reduce rounds) | {} |\n",
+        model.messages.describe("")
+    );
+    out += &format!(
+        "| bytes per step, busiest rank | {} |\n",
+        model.bytes.describe("B")
+    );
+    out += &format!(
+        "| collectives per step | {:.2}, each ⌈log₂ P⌉ rounds |\n",
+        model.collectives
+    );
+    out += &format!(
+        "| load imbalance | {:.3} (measured {:.3}–{:.3}) |\n\n",
+        model.imbalance.1, model.imbalance.0, model.imbalance.2
+    );
+    out
+}
+
+/// The weak and strong efficiency at a few rank counts, each as low–high (middle).
+fn efficiency_table(prediction: &Prediction) -> String {
+    let mut out =
+        String::from("| ranks P | weak efficiency | strong efficiency |\n| ---: | ---: | ---: |\n");
+    let cell = |curve: &[Predicted], ranks: u64| {
+        curve
+            .iter()
+            .find(|p| p.ranks == ranks)
+            .map_or("—".to_owned(), |p| {
+                format!(
+                    "{}–{} ({})",
+                    percent(p.low),
+                    percent(p.high),
+                    percent(p.mid)
+                )
+            })
+    };
+    for ranks in [8, 64, 1024, 8192, MAX_RANKS] {
+        out += &format!(
+            "| {ranks} | {} | {} |\n",
+            cell(&prediction.weak, ranks),
+            cell(&prediction.strong, ranks)
+        );
+    }
+    out
+}
+
+/// The held-out check: each configuration measured and predicted, with the error.
 fn checks_table(checks: &[Checked]) -> String {
     let mut out = String::from(
         "| n | ranks | measured ms/step | predicted ms/step | error |\n| ---: | ---: | ---: | ---: | ---: |\n",

@@ -355,77 +355,8 @@ impl Validator<'_> {
         };
         let refuse =
             |problem: String, fix: &str| self.invalid(origin, "method.discard", problem, fix);
-        let forms = "give a simulated time to drop from the start (discard = 200.0), a share \
-                     of the run (discard = \"30%\"), or discard = \"auto\" (MSER-5 finds it)";
-        // The latest cut that leaves MIN_KEPT_BLOCKS blocks: the end of the block before
-        // them, in steps (block j ends at step ⌈j·steps/blocks⌉).
-        let blocks = u128::from(SERIES_BLOCKS.min(steps));
-        let kept = MIN_KEPT_BLOCKS as u128;
-        let last_cut = match blocks > kept {
-            true => ((blocks - kept) * u128::from(steps)).div_ceil(blocks) as f64,
-            false => 0.0,
-        };
-        let leaves_too_little = |what: String, most: String| {
-            refuse(
-                format!(
-                    "is {what}, which leaves fewer than {MIN_KEPT_BLOCKS} of the run's {blocks} \
-                     blocks ({steps} steps) to average"
-                ),
-                &format!("discard at most {most}, or run longer"),
-            )
-        };
-        let discard = match value {
-            NumberOrWord::Word(word) if word == "auto" => return Ok(Discard::Automatic),
-            NumberOrWord::Number(time) if time >= 0.0 && time.is_finite() => Discard::Time(time),
-            NumberOrWord::Number(time) => {
-                return Err(refuse(
-                    format!("is {time}, not a simulated time ≥ 0"),
-                    forms,
-                ));
-            }
-            NumberOrWord::Word(word) => {
-                let percent = word
-                    .strip_suffix('%')
-                    .and_then(|p| p.trim().parse::<f64>().ok());
-                match percent {
-                    Some(percent) if (0.0..100.0).contains(&percent) => {
-                        Discard::Fraction(percent / 100.0)
-                    }
-                    Some(percent) if percent >= 100.0 => {
-                        return Err(refuse(
-                            format!("is {percent}%, the whole run: nothing is left to average"),
-                            forms,
-                        ));
-                    }
-                    _ => {
-                        return Err(refuse(
-                            format!("is \"{word}\", neither a share of the run nor \"auto\""),
-                            forms,
-                        ));
-                    }
-                }
-            }
-        };
-        let slack = 1.0 + 1e-9;
-        match (discard, dt) {
-            (Discard::Fraction(fraction), _) if fraction * steps as f64 > last_cut * slack => {
-                Err(leaves_too_little(
-                    format!("{}%", 100.0 * fraction),
-                    format!("\"{}%\"", (100.0 * last_cut / steps as f64).floor()),
-                ))
-            }
-            (Discard::Time(time), DtChoice::Fixed(dt)) if time >= steps as f64 * dt => Err(refuse(
-                format!(
-                    "is t = {time}, past the end of the run at t = {} ({steps} steps of dt = {dt})",
-                    steps as f64 * dt
-                ),
-                &format!("discard at most {}, or run longer", last_cut * dt),
-            )),
-            (Discard::Time(time), DtChoice::Fixed(dt)) if time > last_cut * dt * slack => Err(
-                leaves_too_little(format!("t = {time}"), format!("{}", last_cut * dt)),
-            ),
-            _ => Ok(discard),
-        }
+        let discard = parse_discard(value).map_err(|problem| refuse(problem, DISCARD_FORMS))?;
+        leaves_blocks(discard, dt, steps).map_err(|(problem, fix)| refuse(problem, &fix))
     }
 
     /// The TC model time of the event method, if given.
@@ -995,6 +926,80 @@ impl Validator<'_> {
             ));
         }
         Ok(())
+    }
+}
+
+/// The ways to write a discard, for its errors.
+const DISCARD_FORMS: &str = "give a simulated time to drop from the start (discard = 200.0), a \
+                             share of the run (discard = \"30%\"), or discard = \"auto\" \
+                             (MSER-5 finds it)";
+
+/// A discard as written: "auto", a simulated time ≥ 0, or a share of the run under
+/// 100% ("30%"); otherwise what is wrong with it.
+fn parse_discard(value: NumberOrWord) -> Result<Discard, String> {
+    match value {
+        NumberOrWord::Word(word) if word == "auto" => Ok(Discard::Automatic),
+        NumberOrWord::Number(time) if time >= 0.0 && time.is_finite() => Ok(Discard::Time(time)),
+        NumberOrWord::Number(time) => Err(format!("is {time}, not a simulated time ≥ 0")),
+        NumberOrWord::Word(word) => {
+            let percent = word
+                .strip_suffix('%')
+                .and_then(|p| p.trim().parse::<f64>().ok());
+            match percent {
+                Some(percent) if (0.0..100.0).contains(&percent) => {
+                    Ok(Discard::Fraction(percent / 100.0))
+                }
+                Some(percent) if percent >= 100.0 => Err(format!(
+                    "is {percent}%, the whole run: nothing is left to average"
+                )),
+                _ => Err(format!(
+                    "is \"{word}\", neither a share of the run nor \"auto\""
+                )),
+            }
+        }
+    }
+}
+
+/// `discard` when it leaves at least [`MIN_KEPT_BLOCKS`] of the run's blocks of `steps`
+/// to average (a time is checked where dt is fixed: with dt = "auto" the summary says
+/// when too little is left); otherwise what is wrong and how to fix it.
+fn leaves_blocks(discard: Discard, dt: DtChoice, steps: u64) -> Result<Discard, (String, String)> {
+    // The latest cut that leaves MIN_KEPT_BLOCKS blocks: the end of the block before
+    // them, in steps (block j ends at step ⌈j·steps/blocks⌉).
+    let blocks = u128::from(SERIES_BLOCKS.min(steps));
+    let kept = MIN_KEPT_BLOCKS as u128;
+    let last_cut = match blocks > kept {
+        true => ((blocks - kept) * u128::from(steps)).div_ceil(blocks) as f64,
+        false => 0.0,
+    };
+    let leaves_too_little = |what: String, most: String| {
+        (
+            format!(
+                "is {what}, which leaves fewer than {MIN_KEPT_BLOCKS} of the run's {blocks} \
+                 blocks ({steps} steps) to average"
+            ),
+            format!("discard at most {most}, or run longer"),
+        )
+    };
+    let slack = 1.0 + 1e-9;
+    match (discard, dt) {
+        (Discard::Fraction(fraction), _) if fraction * steps as f64 > last_cut * slack => {
+            Err(leaves_too_little(
+                format!("{}%", 100.0 * fraction),
+                format!("\"{}%\"", (100.0 * last_cut / steps as f64).floor()),
+            ))
+        }
+        (Discard::Time(time), DtChoice::Fixed(dt)) if time >= steps as f64 * dt => Err((
+            format!(
+                "is t = {time}, past the end of the run at t = {} ({steps} steps of dt = {dt})",
+                steps as f64 * dt
+            ),
+            format!("discard at most {}, or run longer", last_cut * dt),
+        )),
+        (Discard::Time(time), DtChoice::Fixed(dt)) if time > last_cut * dt * slack => Err(
+            leaves_too_little(format!("t = {time}"), format!("{}", last_cut * dt)),
+        ),
+        _ => Ok(discard),
     }
 }
 

@@ -436,6 +436,43 @@ impl GasPlan {
             .collect()
     }
 
+    /// The empty grid of band `band`, for its `own` disks, holding the edge disks
+    /// `below` and `above` of its neighbours (moved next to it).
+    fn band_grid(
+        &self,
+        band: usize,
+        own: usize,
+        below: Vec<[f64; 3]>,
+        above: Vec<[f64; 3]>,
+    ) -> BandGrid {
+        let domain = &self.domain;
+        let (low, high) = self.bounds(band);
+        let reach = 2.0 * self.max_radius;
+        let periodic = domain.boundary == Boundary::Periodic;
+        let mut grid = match self.n_bands {
+            1 => BandGrid::new(
+                domain.width,
+                0.0,
+                domain.height,
+                reach,
+                own,
+                [periodic, periodic],
+            ),
+            _ => BandGrid::new(
+                domain.width,
+                low - reach,
+                high - low + 2.0 * reach,
+                reach,
+                own + below.len() + above.len(),
+                [periodic, false],
+            ),
+        };
+        for [x, y, r] in below.into_iter().chain(above) {
+            grid.insert(x, y, r);
+        }
+        grid
+    }
+
     /// The disks of one band, against the edge disks `below` and `above` of its
     /// neighbours (moved next to it).
     fn place_band(
@@ -460,27 +497,7 @@ impl GasPlan {
         let (low, high) = self.bounds(band);
         let reach = 2.0 * self.max_radius;
         let periodic = domain.boundary == Boundary::Periodic;
-        let mut grid = match self.n_bands {
-            1 => BandGrid::new(
-                domain.width,
-                0.0,
-                domain.height,
-                reach,
-                end - first,
-                [periodic, periodic],
-            ),
-            _ => BandGrid::new(
-                domain.width,
-                low - reach,
-                high - low + 2.0 * reach,
-                reach,
-                end - first + below.len() + above.len(),
-                [periodic, false],
-            ),
-        };
-        for [x, y, r] in below.into_iter().chain(above) {
-            grid.insert(x, y, r);
-        }
+        let mut grid = self.band_grid(band, end - first, below, above);
         let mut rng = generator(self.gas.seed, Stream::Tries, band);
         let mut positions = Vec::with_capacity(end - first);
         for k in 0..end - first {
