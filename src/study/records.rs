@@ -1,6 +1,7 @@
 //! Study records: one row per repetition, kept in Parquet through polars (the schema is
-//! documented in docs/records.md, which a test keeps in step with [`to_frame`]; bump
-//! [`SCHEMA_VERSION`] when a column is added or changes meaning).
+//! documented in docs/records.md, which a test keeps in step with [`to_frame`]; a column
+//! added is marked with the version that adds it, and one that changes meaning is added
+//! under a new name).
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -16,7 +17,9 @@ use crate::study::environment::Environment;
 use crate::study::manifest::{PLACEMENT_KEYS, Scaling};
 use crate::system::output::write_atomically;
 
-pub const SCHEMA_VERSION: u32 = 14;
+/// The version of the files this collide writes: the newest column's, so that adding a
+/// column marked with the next version (`@VERSION` in `for_each_column!`) bumps it.
+pub const SCHEMA_VERSION: u32 = newest_version(ADDED_COLUMNS);
 /// The first version collide wrote; [`ADDED_COLUMNS`] upgrades every later one.
 const OLDEST_READABLE_VERSION: u32 = 1;
 
@@ -29,78 +32,6 @@ enum Fill {
     /// Not measured (null).
     NullU64,
 }
-
-/// Columns added after version 1, each with the version that added it and what older
-/// files implicitly meant: reading an older file adds them with that value.
-const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
-    // Version 1 studies could be weak only through their manifest; records assumed strong.
-    (2, "scaling", Fill::Str("strong")),
-    // Version 1 ran only the time-stepped method, timed, without accuracy observables.
-    (2, "method", Fill::Str("step")),
-    (2, "observe", Fill::Str("timing")),
-    (2, "events_per_s", Fill::F64(f64::NAN)),
-    (2, "collision_rate", Fill::F64(f64::NAN)),
-    (2, "temperature", Fill::F64(f64::NAN)),
-    (2, "pressure", Fill::F64(f64::NAN)),
-    (2, "compressibility_z", Fill::F64(f64::NAN)),
-    (2, "missed_collisions", Fill::NullU64),
-    (2, "missed_collision_fraction", Fill::F64(f64::NAN)),
-    (2, "mean_overlap", Fill::F64(f64::NAN)),
-    (2, "energy_relative_error", Fill::F64(f64::NAN)),
-    (2, "collapse_guard_fired", Fill::NullU64),
-    // Version 2 did not record the stepping loop's CPU time (some of its files do) or
-    // how far the rms disk moves per step.
-    (3, "cpu_s", Fill::F64(f64::NAN)),
-    (3, "rms_step_over_radius", Fill::F64(f64::NAN)),
-    // Version 3 had no `method = "auto"` / tolerance-chosen dt.
-    (4, "choice", Fill::Str("")),
-    (4, "temperature_curve", Fill::Str("")),
-    // Version 4 had no collapse detector (a collapsing run stalled until its timeout, so
-    // no successful row had a collapse) and did not record the event method's TC time.
-    (5, "collapse_time", Fill::F64(f64::NAN)),
-    (5, "tc", Fill::F64(f64::NAN)),
-    // Version 5 did not measure how far disks went into the walls; it judged
-    // oversubscription by the machine's CPUs, not those the study could use, and did not
-    // record them.
-    (6, "max_wall_penetration", Fill::F64(f64::NAN)),
-    (6, "usable_cpus", Fill::NullU64),
-    (6, "cpu_affinity", Fill::Str("")),
-    // Version 6 never drew a run offscreen.
-    (7, "draw_s", Fill::F64(f64::NAN)),
-    (7, "fps_with_drawing", Fill::F64(f64::NAN)),
-    // Version 7 ran one program per study, never an A/B check.
-    (8, "ab_side", Fill::Str("")),
-    // Version 8 did not count what MPI ranks sent.
-    (9, "messages_per_step_max", Fill::F64(f64::NAN)),
-    (9, "messages_per_step_mean", Fill::F64(f64::NAN)),
-    (9, "bytes_per_step_max", Fill::F64(f64::NAN)),
-    (9, "bytes_per_step_mean", Fill::F64(f64::NAN)),
-    (9, "collectives_per_step", Fill::F64(f64::NAN)),
-    // Version 9 did not record the scene's contents, only its name.
-    (10, "scene_hash", Fill::Str("")),
-    // Version 10 ran every run on this host, never as a batch job.
-    (11, "job_id", Fill::Str("")),
-    (11, "node_list", Fill::Str("")),
-    (11, "queue_wait_s", Fill::F64(f64::NAN)),
-    // Version 11 averaged the observables from t = 0 without an error bar.
-    (12, "equilibration_cut_time", Fill::F64(f64::NAN)),
-    (12, "compressibility_z_se", Fill::F64(f64::NAN)),
-    (12, "compressibility_z_g", Fill::F64(f64::NAN)),
-    (12, "collision_rate_se", Fill::F64(f64::NAN)),
-    (12, "temperature_se", Fill::F64(f64::NAN)),
-    // Version 12 kept the ranks' load imbalance in the JSON summary only.
-    (13, "load_imbalance", Fill::F64(f64::NAN)),
-    // Version 12 did not record where each rank ran.
-    (13, "rank_cpus", Fill::Str("")),
-    // Version 13 did not say which rule cut the series (every cut was MSER-5's), nor
-    // compare the seeds of a setup.
-    (14, "equilibration_cut", Fill::Str("")),
-    (14, "compressibility_z_replica_mean", Fill::F64(f64::NAN)),
-    (14, "compressibility_z_replica_se", Fill::F64(f64::NAN)),
-    (14, "collision_rate_replica_mean", Fill::F64(f64::NAN)),
-    (14, "collision_rate_replica_se", Fill::F64(f64::NAN)),
-    (14, "replicas", Fill::NullU64),
-];
 
 /// What became of one run.
 pub const STATUS_OK: &str = "ok";
@@ -461,48 +392,52 @@ fn civil_from_days(days: i64) -> (i64, u32, u32) {
 /// grouped by type. [`Record`] is declared from it, and so are writing, reading and the
 /// blank row. A column marked `<- run` is the JSON summary's field of the same name
 /// ([`RunSummary`], where its meaning and unit are documented), copied by
-/// [`Record::measured`] through [`ToCell`]; docs/records.md documents every column.
+/// [`Record::measured`] through [`ToCell`]; docs/records.md documents every column. A
+/// column added after version 1 is marked `@VERSION`, the version that added it (and
+/// `= "TEXT"` where older files meant that text rather than "not measured"): the upgrade
+/// of older files ([`ADDED_COLUMNS`]) and the version written ([`SCHEMA_VERSION`])
+/// follow from the marks.
 macro_rules! for_each_column {
     ($apply:ident) => {
         $apply! {
-            str: study, manifest_hash, build_id, config_key, scene, scaling, status, error, backend,
+            str: study, manifest_hash, build_id, config_key, scene, scaling @2 = "strong", status, error, backend,
                  boundary <- run, broadphase <- run, state_hash <- run, hostname, cpu_model, os,
                  rustc, profile, features, git_commit, mpi_library, study_started_utc,
-                 finished_utc, method <- run, observe <- run, choice <- run,
-                 temperature_curve <- run, cpu_affinity, ab_side, scene_hash, job_id,
-                 node_list, rank_cpus <- run, equilibration_cut <- run;
+                 finished_utc, method <- run @2 = "step", observe <- run @2 = "timing", choice <- run @4,
+                 temperature_curve <- run @4, cpu_affinity @6, ab_side @8, scene_hash @10, job_id @11,
+                 node_list @11, rank_cpus <- run @13, equilibration_cut <- run @14;
             u64: threads <- run, ranks <- run, workers <- run, n <- run, steps <- run,
                  pair_collisions <- run, wall_collisions <- run, logical_cores, physical_cores,
                  memory_bytes;
             u32: repetition;
-            f64: dt <- run, packing <- run, wall_s <- run, cpu_s <- run, setup_s <- run,
-                 fps <- run, draw_s <- run, fps_with_drawing <- run, particle_steps_per_s <- run, integration_s <- run,
+            f64: dt <- run, packing <- run, wall_s <- run, cpu_s <- run @3, setup_s <- run,
+                 fps <- run, draw_s <- run @7, fps_with_drawing <- run @7, particle_steps_per_s <- run, integration_s <- run,
                  broad_phase_s <- run, collision_s <- run, communication_s <- run,
-                 messages_per_step_max <- run, messages_per_step_mean <- run,
-                 bytes_per_step_max <- run, bytes_per_step_mean <- run,
-                 collectives_per_step <- run, load_imbalance <- run,
+                 messages_per_step_max <- run @9, messages_per_step_mean <- run @9,
+                 bytes_per_step_max <- run @9, bytes_per_step_mean <- run @9,
+                 collectives_per_step <- run @9, load_imbalance <- run @13,
                  kinetic_energy_initial <- run, kinetic_energy_final <- run, momentum_initial_x,
                  momentum_initial_y, momentum_final_x, momentum_final_y, max_overlap <- run,
-                 max_wall_penetration <- run, load_average_start, load_average,
-                 load_average_end, events_per_s <- run, collision_rate <- run,
-                 temperature <- run, pressure <- run, compressibility_z <- run,
-                 missed_collision_fraction <- run, mean_overlap <- run,
-                 energy_relative_error <- run, rms_step_over_radius <- run,
-                 collapse_time <- run, tc <- run, queue_wait_s,
-                 equilibration_cut_time <- run, compressibility_z_se <- run,
-                 compressibility_z_g <- run, collision_rate_se <- run, temperature_se <- run,
-                 compressibility_z_replica_mean, compressibility_z_replica_se,
-                 collision_rate_replica_mean, collision_rate_replica_se;
+                 max_wall_penetration <- run @6, load_average_start, load_average,
+                 load_average_end, events_per_s <- run @2, collision_rate <- run @2,
+                 temperature <- run @2, pressure <- run @2, compressibility_z <- run @2,
+                 missed_collision_fraction <- run @2, mean_overlap <- run @2,
+                 energy_relative_error <- run @2, rms_step_over_radius <- run @3,
+                 collapse_time <- run @5, tc <- run @5, queue_wait_s @11,
+                 equilibration_cut_time <- run @12, compressibility_z_se <- run @12,
+                 compressibility_z_g <- run @12, collision_rate_se <- run @12, temperature_se <- run @12,
+                 compressibility_z_replica_mean @14, compressibility_z_replica_se @14,
+                 collision_rate_replica_mean @14, collision_rate_replica_se @14;
             bool: oversubscribed <- run, git_dirty;
-            opt_u64: seed <- run, missed_collisions <- run, collapse_guard_fired <- run,
-                 usable_cpus, replicas
+            opt_u64: seed <- run, missed_collisions <- run @2, collapse_guard_fired <- run @2,
+                 usable_cpus @6, replicas @14
         }
     };
 }
 
 /// Declares [`Record`] from the column list, its blank row and its copy of a summary.
 macro_rules! declare_record {
-    ($($kind:ident: $($name:ident $(<- $from:ident)?),*);*) => {
+    ($($kind:ident: $($name:ident $(<- $from:ident)? $(@ $from_added:literal $(= $from_meant:literal)?)?),*);*) => {
         /// One repetition of one configuration: the result of the run (its JSON summary),
         /// the study's context and the environment. Failed runs keep their row, with NaN
         /// measurements, zero counts, an empty `state_hash` and the reason in `error`.
@@ -542,6 +477,51 @@ macro_rules! column_type {
 }
 
 for_each_column!(declare_record);
+
+/// Declares [`ADDED_COLUMNS`] from the column list: each column marked `@VERSION` (and
+/// `= "TEXT"` where older files meant a text of their own).
+macro_rules! declare_added_columns {
+    ($($kind:ident: $($name:ident $(<- $from:ident)? $(@ $added:literal $(= $meant:literal)?)?),*);*) => {
+        /// Columns added after version 1, each with the version that added it and what
+        /// older files implicitly meant: reading an older file adds them with that value.
+        const ADDED_COLUMNS: &[(u32, &str, Fill)] = &[
+            $($($(($added, stringify!($name), older_fill!($kind $(, $meant)?)),)?)*)*
+        ];
+    };
+}
+
+/// What files older than a column meant by its absence: the text it names, or the
+/// column kind's "not measured". A count, a flag or a repetition column added later
+/// must say what it meant.
+macro_rules! older_fill {
+    ($kind:ident, $meant:literal) => {
+        Fill::Str($meant)
+    };
+    (str) => {
+        Fill::Str("")
+    };
+    (f64) => {
+        Fill::F64(f64::NAN)
+    };
+    (opt_u64) => {
+        Fill::NullU64
+    };
+}
+
+for_each_column!(declare_added_columns);
+
+/// The newest version among `columns`: the version this collide writes.
+const fn newest_version(columns: &[(u32, &str, Fill)]) -> u32 {
+    let mut newest = OLDEST_READABLE_VERSION;
+    let mut i = 0;
+    while i < columns.len() {
+        if columns[i].0 > newest {
+            newest = columns[i].0;
+        }
+        i += 1;
+    }
+    newest
+}
 
 /// A column's value as JSON: text, a count, a number (null where not measured), true
 /// or false.
@@ -591,7 +571,7 @@ impl Record {
     /// column has that name.
     pub fn value(&self, name: &str) -> Option<serde_json::Value> {
         macro_rules! look_up {
-            ($($kind:ident: $($column:ident $(<- $from:ident)?),*);*) => {
+            ($($kind:ident: $($column:ident $(<- $from:ident)? $(@ $from_added:literal $(= $from_meant:literal)?)?),*);*) => {
                 match name {
                     $($(stringify!($column) => Some(self.$column.to_value()),)*)*
                     _ => None,
@@ -605,9 +585,9 @@ impl Record {
 /// The records as a table, with `schema_version` first.
 pub fn to_frame(records: &[Record]) -> PolarsResult<DataFrame> {
     macro_rules! build {
-        (str: $($s:ident $(<- $s_:ident)?),*; u64: $($u:ident $(<- $u_:ident)?),*;
-         u32: $($r:ident $(<- $r_:ident)?),*; f64: $($f:ident $(<- $f_:ident)?),*;
-         bool: $($b:ident $(<- $b_:ident)?),*; opt_u64: $($o:ident $(<- $o_:ident)?),*) => {{
+        (str: $($s:ident $(<- $s_:ident)? $(@ $s__added:literal $(= $s__meant:literal)?)?),*; u64: $($u:ident $(<- $u_:ident)? $(@ $u__added:literal $(= $u__meant:literal)?)?),*;
+         u32: $($r:ident $(<- $r_:ident)? $(@ $r__added:literal $(= $r__meant:literal)?)?),*; f64: $($f:ident $(<- $f_:ident)? $(@ $f__added:literal $(= $f__meant:literal)?)?),*;
+         bool: $($b:ident $(<- $b_:ident)? $(@ $b__added:literal $(= $b__meant:literal)?)?),*; opt_u64: $($o:ident $(<- $o_:ident)? $(@ $o__added:literal $(= $o__meant:literal)?)?),*) => {{
             let mut columns = vec![Column::new(
                 "schema_version".into(),
                 vec![SCHEMA_VERSION; records.len()],
@@ -657,9 +637,9 @@ pub fn from_frame(frame: &DataFrame) -> anyhow::Result<Vec<Record>> {
     };
     let rows = frame.height();
     macro_rules! read {
-        (str: $($s:ident $(<- $s_:ident)?),*; u64: $($u:ident $(<- $u_:ident)?),*;
-         u32: $($r:ident $(<- $r_:ident)?),*; f64: $($f:ident $(<- $f_:ident)?),*;
-         bool: $($b:ident $(<- $b_:ident)?),*; opt_u64: $($o:ident $(<- $o_:ident)?),*) => {{
+        (str: $($s:ident $(<- $s_:ident)? $(@ $s__added:literal $(= $s__meant:literal)?)?),*; u64: $($u:ident $(<- $u_:ident)? $(@ $u__added:literal $(= $u__meant:literal)?)?),*;
+         u32: $($r:ident $(<- $r_:ident)? $(@ $r__added:literal $(= $r__meant:literal)?)?),*; f64: $($f:ident $(<- $f_:ident)? $(@ $f__added:literal $(= $f__meant:literal)?)?),*;
+         bool: $($b:ident $(<- $b_:ident)? $(@ $b__added:literal $(= $b__meant:literal)?)?),*; opt_u64: $($o:ident $(<- $o_:ident)? $(@ $o__added:literal $(= $o__meant:literal)?)?),*) => {{
             $(let $s = column(stringify!($s))?.str().with_context(|| mistyped(stringify!($s), "text"))?;)*
             $(let $u = column(stringify!($u))?.u64().with_context(|| mistyped(stringify!($u), "a count (u64)"))?;)*
             $(let $r = column(stringify!($r))?.u32().with_context(|| mistyped(stringify!($r), "a count (u32)"))?;)*
@@ -809,5 +789,29 @@ mod tests {
         assert_eq!(civil_from_days(0), (1970, 1, 1));
         assert_eq!(civil_from_days(19_782), (2024, 2, 29));
         assert_eq!(civil_from_days(20_414), (2025, 11, 22));
+    }
+
+    #[test]
+    fn the_column_marks_give_the_version_written_and_what_older_files_meant() {
+        // The newest mark is the version written: version 14 added the replica columns.
+        assert_eq!(SCHEMA_VERSION, 14);
+        let added = |name: &str| {
+            ADDED_COLUMNS
+                .iter()
+                .find(|column| column.1 == name)
+                .map(|&(version, _, fill)| (version, format!("{fill:?}")))
+        };
+        // A text of its own where older files meant one, else the kind's "not measured".
+        assert_eq!(added("scaling"), Some((2, "Str(\"strong\")".into())));
+        assert_eq!(added("method"), Some((2, "Str(\"step\")".into())));
+        assert_eq!(added("scene_hash"), Some((10, "Str(\"\")".into())));
+        assert_eq!(
+            added("equilibration_cut_time"),
+            Some((12, "F64(NaN)".into()))
+        );
+        assert_eq!(added("replicas"), Some((14, "NullU64".into())));
+        // Columns of version 1 are not added to older files: they were always there.
+        assert_eq!(added("wall_s"), None);
+        assert_eq!(ADDED_COLUMNS.len(), 47);
     }
 }
