@@ -674,6 +674,11 @@ fn accuracy_records() -> Vec<Record> {
             record.max_wall_penetration = 2.0 * dt;
             record.compressibility_z = (1.0 + 4.0 * packing) * z_factor;
             record.collision_rate = (0.1 + packing) * z_factor;
+            // An energy error growing with dt (none recorded for the event reference).
+            record.energy_relative_error = match method {
+                "step" => -0.1 * dt,
+                _ => f64::NAN,
+            };
             out.push(record);
         }
     }
@@ -738,6 +743,10 @@ fn the_accuracy_report_tabulates_errors_and_draws_the_pareto_and_stability_figur
         text.contains("The step method fails at v_rms·dt/r ≥ 0.100"),
         "{text}"
     );
+    // Each row ends in its energy error: the step's, and a dash for the reference.
+    assert!(text.contains("| ω error | ΔE/E |"), "{text}");
+    assert!(text.contains("| -1.0e-2 |\n"), "{text}");
+    assert!(text.contains("| reference | — |\n"), "{text}");
     assert!(text.contains("![accuracy-stability.png](accuracy-stability.png)"));
     // One run per setup: no scaling sections.
     assert!(!text.contains("Time per run"), "{text}");

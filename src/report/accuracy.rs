@@ -54,6 +54,9 @@ pub struct AccuracyPoint {
     pub z_error: f64,
     /// (ω − ω_ref)/ω_ref likewise.
     pub rate_error: f64,
+    /// (E_final − E_initial)/E_initial of an elastic scene, potential energy included
+    /// under gravity; NaN for inelastic scenes and where not recorded.
+    pub energy_error: f64,
 }
 
 impl AccuracyPoint {
@@ -183,6 +186,7 @@ fn summarise(method: &str, runs: &[&Record]) -> AccuracyPoint {
         collision_rate: med(|r| r.collision_rate),
         z_error: f64::NAN,
         rate_error: f64::NAN,
+        energy_error: med(|r| r.energy_relative_error),
     }
 }
 

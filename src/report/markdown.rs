@@ -685,13 +685,15 @@ fn accuracy_section(out: &mut String, section: &AccuracySection) {
          {FAILURE_MISSED_FRACTION:e} of its collisions; a wall penetration is **bold** above \
          {FLAG_WALL_PENETRATION} of the radius. Speed is simulated time per wall \
          second (every run simulates the same time, so it compares methods at equal \
-         physics); particle-steps/s counts each method's own steps.\n"
+         physics); particle-steps/s counts each method's own steps. ΔE/E is the change of \
+         an elastic scene's energy over the run (kinetic plus potential under gravity): \
+         0 up to rounding for the event method, and for the step method without a field.\n"
     );
     for group in &section.groups {
         let _ = writeln!(out, "### Packing {:.2}\n", group.packing);
         let _ = writeln!(
             out,
-            "| method | dt | v_rms·dt/r | wall s | sim time / s | particle-steps/s | missed fraction | max overlap | max wall penetration | Z ± SE | Z error | ω | ω error |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+            "| method | dt | v_rms·dt/r | wall s | sim time / s | particle-steps/s | missed fraction | max overlap | max wall penetration | Z ± SE | Z error | ω | ω error | ΔE/E |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
         );
         if let Some(reference) = &group.reference {
             accuracy_row(out, reference, true);
@@ -761,13 +763,14 @@ fn accuracy_row(out: &mut String, p: &AccuracyPoint, is_reference: bool) {
     };
     let _ = writeln!(
         out,
-        "| {method} | {dt} | {step} | {:.4} | {:.1} | {:.3e} | {missed} | {overlap} | {wall} | {z} | {} | {:.4} | {} |",
+        "| {method} | {dt} | {step} | {:.4} | {:.1} | {:.3e} | {missed} | {overlap} | {wall} | {z} | {} | {:.4} | {} | {} |",
         p.wall_s,
         p.sim_time_per_s,
         p.particle_steps_per_s,
         error(p.z_error),
         p.collision_rate,
         error(p.rate_error),
+        finite_or_dash(p.energy_error, format!("{:+.1e}", p.energy_error)),
     );
 }
 
