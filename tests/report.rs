@@ -711,6 +711,18 @@ fn the_accuracy_report_tabulates_errors_and_draws_the_pareto_and_stability_figur
     let white = count(&stability, [255, 255, 255]);
     assert!(white < 1100 * 560 / 2, "mostly blank: {white} white pixels");
     assert!(count(&stability, [0, 0, 0]) > 500);
+    // One packing alone (a study without a packing sweep) still fills its row of cells.
+    let one_packing = accuracy::analyse(&records[..4]);
+    assert_eq!(one_packing.len(), 1);
+    let one_row = dir.path().join("one-row");
+    std::fs::create_dir(&one_row).unwrap();
+    let one_row = figures::write(&Stability(&one_packing), &one_row).unwrap();
+    let one_row = image::open(&one_row).unwrap().to_rgb8();
+    let white = count(&one_row, [255, 255, 255]);
+    assert!(
+        white < 1100 * 560 * 3 / 4,
+        "cells not drawn: {white} white pixels"
+    );
     let pictures = markdown::Pictures {
         accuracy: Some(markdown::AccuracySection {
             groups,

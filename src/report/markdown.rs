@@ -786,15 +786,20 @@ fn failure_line(out: &mut String, group: &PackingGroup) {
                 out,
                 "The step method fails at v_rms·dt/r ≥ {:.3}{}.\n",
                 worst_ok.step_over_radius,
-                largest_ok.map_or_else(String::new, |p| format!(
-                    "; the largest passing step is v_rms·dt/r = {:.3} (Z error {:+.2}%, {:.1}× the event method's speed)",
-                    p.step_over_radius,
-                    100.0 * p.z_error,
-                    group
-                        .reference
-                        .as_ref()
-                        .map_or(f64::NAN, |r| p.sim_time_per_s / r.sim_time_per_s)
-                ))
+                largest_ok.map_or_else(String::new, |p| match &group.reference {
+                    Some(reference) => format!(
+                        "; the largest passing step is v_rms·dt/r = {:.3} (Z error {:+.2}%, \
+                         {:.1}× the event method's speed)",
+                        p.step_over_radius,
+                        100.0 * p.z_error,
+                        p.sim_time_per_s / reference.sim_time_per_s
+                    ),
+                    None => format!(
+                        "; the largest passing step is v_rms·dt/r = {:.3} (no event reference \
+                         to measure its errors against)",
+                        p.step_over_radius
+                    ),
+                })
             );
         }
         None => {

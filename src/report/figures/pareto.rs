@@ -42,9 +42,13 @@ impl<'a> Chart<'a> for Pareto<'a> {
     }
 }
 
-/// An error as plotted: its magnitude, 0 raised to the floor.
+/// An error as plotted: its magnitude, 0 raised to the floor; NaN (no reference to
+/// measure it against) stays NaN and is not drawn.
 fn plotted(error: f64) -> f64 {
-    error.abs().max(ERROR_FLOOR)
+    match error.is_nan() {
+        true => f64::NAN,
+        false => error.abs().max(ERROR_FLOOR),
+    }
 }
 
 /// The error axis' right end; its left end is half the floor.
@@ -213,4 +217,16 @@ fn draw_front(
             .legend(|(x, y)| Circle::new((x + 10, y), 6, BLACK.stroke_width(2)));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_error_without_a_reference_is_not_drawn_as_no_error() {
+        assert!(plotted(f64::NAN).is_nan());
+        assert_eq!(plotted(0.0), ERROR_FLOOR);
+        assert_eq!(plotted(-0.25), 0.25);
+    }
 }

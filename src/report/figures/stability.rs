@@ -123,7 +123,9 @@ fn map_axes<'a, 'b>(
     columns: &[f64],
     groups: &[PackingGroup],
 ) -> anyhow::Result<Map<'a, 'b>> {
-    let (nx, ny) = (columns.len().max(1), groups.len().max(1));
+    // At least two of each: a segmented axis of one value has no length to draw on (the
+    // second row or column then stays blank and unlabelled).
+    let (nx, ny) = (columns.len().max(2), groups.len().max(2));
     let mut chart = ChartBuilder::on(area)
         .margin(16)
         .x_label_area_size(50)
