@@ -174,16 +174,28 @@ fn study_records(scaling: &str) -> Vec<Record> {
 /// An MPI study of one setup: 1 rank, 4 ranks of 1 thread and 2 ranks of 2 threads (4
 /// workers each), three runs each; the runs of 2 × 2 end in `hybrid_hash`.
 fn hybrid_records(hybrid_hash: &str) -> Vec<Record> {
+    let mut records = placed_records(&[(1, 1, 1, 0.0100), (4, 1, 1, 0.0040), (2, 2, 1, 0.0020)]);
+    for record in records.iter_mut().filter(|r| r.threads > 1) {
+        record.state_hash = hybrid_hash.into();
+    }
+    records
+}
+
+/// An MPI study of one setup, three runs at each (ranks, threads per rank, nodes,
+/// seconds) of `placements`, keyed as a manifest's `[placement]` keys them.
+fn placed_records(placements: &[(usize, usize, usize, f64)]) -> Vec<Record> {
     let environment = environment();
     let mut records = Vec::new();
-    for (ranks, threads, wall_s) in [(1, 1, 0.0100), (4, 1, 0.0040), (2, 2, 0.0020)] {
-        let per_rank = match threads {
+    for &(ranks, threads, nodes, wall_s) in placements {
+        let entry = |name: &str, count: usize| match count {
             1 => String::new(),
-            count => format!(";threads={count}"),
+            count => format!(";{name}={count}"),
         };
         let key = format!(
             "scene=seed-1000;n=-;packing=-;dt=-;steps=-;seed=-;broadphase=-;backend=mpi;\
-             workers={ranks}{per_rank}"
+             workers={ranks}{}{}",
+            entry("nodes", nodes),
+            entry("threads", threads)
         );
         for repetition in 0..3 {
             let context = RecordContext {
@@ -200,14 +212,34 @@ fn hybrid_records(hybrid_hash: &str) -> Vec<Record> {
                 environment: &environment,
                 study_started_utc: "2026-11-22T12:00:00Z",
             };
-            let mut run = summary("mpi", threads, ranks, 1000, wall_s);
-            if threads > 1 {
-                run.state_hash = hybrid_hash.into();
-            }
+            let run = summary("mpi", threads, ranks, 1000, wall_s);
             records.push(Record::measured(&context, &run));
         }
     }
     records
+}
+
+#[test]
+fn ranks_spread_over_two_nodes_are_a_curve_of_their_own() {
+    let records = placed_records(&[(1, 1, 1, 0.0100), (4, 1, 1, 0.0040), (4, 1, 2, 0.0050)]);
+    let setups = analysis::analyse(&records).unwrap();
+    assert_eq!(setups.len(), 1, "one setup: the nodes are not part of it");
+    let curves: Vec<(String, Vec<(u64, f64)>)> = (setups[0].backends.iter())
+        .map(|b| {
+            let points = b.points.iter().map(|p| (p.workers, p.speedup)).collect();
+            (b.label(), points)
+        })
+        .collect();
+    // Pooled, 4 ranks would be one point of 6 runs; apart, each has its median.
+    assert_eq!(
+        curves,
+        [
+            ("mpi".to_owned(), vec![(1, 1.0), (4, 2.5)]),
+            ("mpi, 2 nodes".to_owned(), vec![(4, 2.0)])
+        ]
+    );
+    let text = markdown(&records);
+    assert!(text.contains("| mpi, 2 nodes | 4 | 2.00 |"), "{text}");
 }
 
 #[test]

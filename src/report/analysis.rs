@@ -119,13 +119,17 @@ pub enum Baseline {
     Missing,
 }
 
-/// One scaling curve: a backend's runs at one number of threads per MPI rank.
+/// One scaling curve: a backend's runs at one number of threads per MPI rank, on one
+/// number of nodes.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BackendScaling {
     pub backend: String,
     /// The threads each MPI rank stepped on ([`Record::threads_per_rank`]): 1 but for
     /// MPI ranks on several threads each.
     pub threads_per_rank: u64,
+    /// The nodes its ranks spread over ([`Record::nodes`]): 1 but for MPI runs placed
+    /// on several.
+    pub nodes: u64,
     pub baseline: Baseline,
     /// By worker count.
     pub points: Vec<Point>,
@@ -136,7 +140,7 @@ pub struct BackendScaling {
 impl BackendScaling {
     /// The curve's name in tables and legends ([`records::curve_label`]).
     pub fn label(&self) -> String {
-        records::curve_label(&self.backend, self.threads_per_rank)
+        records::curve_label(&self.backend, self.threads_per_rank, self.nodes)
     }
 }
 
@@ -204,7 +208,7 @@ pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {
     };
     let mut setups: Vec<Setup> = Vec::new();
     let mut series_order: Vec<String> = Vec::new();
-    for (series, (backend, threads_per_rank), point) in points {
+    for (series, (backend, threads_per_rank, nodes), point) in points {
         let index = match series_order.iter().position(|s| *s == series) {
             Some(index) => index,
             None => {
@@ -232,13 +236,14 @@ pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {
         };
         let setup = &mut setups[index];
         let curve = |b: &&mut BackendScaling| {
-            b.backend == backend && b.threads_per_rank == threads_per_rank
+            b.backend == backend && b.threads_per_rank == threads_per_rank && b.nodes == nodes
         };
         match setup.backends.iter_mut().find(curve) {
             Some(scaling) => scaling.points.push(point),
             None => setup.backends.push(BackendScaling {
                 backend,
                 threads_per_rank,
+                nodes,
                 baseline: Baseline::Missing,
                 points: vec![point],
                 amdahl: Err(NoFit::FewWorkerCounts(0)),
@@ -252,7 +257,7 @@ pub fn analyse(records: &[Record]) -> anyhow::Result<Vec<Setup>> {
 }
 
 /// The records as a polars table, with each row's series (what one scaling curve
-/// shares), physical setup (what must end in the same state) and threads per rank
+/// shares), physical setup (what must end in the same state), threads per rank and nodes
 /// (which curve of its backend) as key columns.
 fn keyed_frame(records: &[Record], series_keys: &[String]) -> PolarsResult<DataFrame> {
     let mut frame = records::to_frame(records)?;
@@ -261,11 +266,13 @@ fn keyed_frame(records: &[Record], series_keys: &[String]) -> PolarsResult<DataF
     frame.with_column(Column::new("series".into(), series_keys))?;
     frame.with_column(Column::new("setup".into(), setup))?;
     frame.with_column(Column::new("threads_per_rank".into(), per_rank))?;
+    let nodes: Vec<u64> = records.iter().map(Record::nodes).collect();
+    frame.with_column(Column::new("nodes".into(), nodes))?;
     Ok(frame)
 }
 
-/// A scaling curve's backend and threads per rank.
-type Curve = (String, u64);
+/// A scaling curve's backend, threads per rank and nodes.
+type Curve = (String, u64, u64);
 
 /// Median, min and max time, repetitions and median FPS per (series, backend, placement),
 /// in first-seen order: (series, curve, point without its derived ratios).
@@ -281,6 +288,7 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, Curve, Poin
             col("ranks"),
             col("threads"),
             col("threads_per_rank"),
+            col("nodes"),
         ])
         .agg([
             col("wall_s").median().alias("median_s"),
@@ -301,6 +309,7 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, Curve, Poin
     let backend = table.column("backend")?.str()?;
     let workers = table.column("workers")?.u64()?;
     let per_rank = table.column("threads_per_rank")?.u64()?;
+    let nodes = table.column("nodes")?.u64()?;
     let median_s = table.column("median_s")?.f64()?;
     let times = table.column("times")?.list()?;
     let min_s = table.column("min_s")?.f64()?;
@@ -341,7 +350,11 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, Curve, Poin
                 karp_flatt: f64::NAN,
             };
             let text = |column: &StringChunked| column.get(i).unwrap_or_default().to_owned();
-            let curve = (text(backend), per_rank.get(i).unwrap_or(1));
+            let curve = (
+                text(backend),
+                per_rank.get(i).unwrap_or(1),
+                nodes.get(i).unwrap_or(1),
+            );
             Ok((text(series), curve, point))
         })
         .collect()
@@ -370,9 +383,13 @@ fn distinct_hashes_per_series(frame: &DataFrame) -> PolarsResult<BTreeMap<String
 /// Orders a setup's backends and points, picks each backend's baseline and derives
 /// speedup, efficiency, Karp–Flatt and the Amdahl fit from the medians.
 fn derive_scaling(setup: &mut Setup) {
-    setup
-        .backends
-        .sort_by_key(|b| (BackendKind::rank_of(&b.backend), b.threads_per_rank));
+    setup.backends.sort_by_key(|b| {
+        (
+            BackendKind::rank_of(&b.backend),
+            b.threads_per_rank,
+            b.nodes,
+        )
+    });
     for backend in &mut setup.backends {
         backend.points.sort_by_key(|p| p.workers);
     }

@@ -280,6 +280,15 @@ impl Record {
         }
     }
 
+    /// The nodes the run's ranks spread over, from its configuration key (`nodes=N`, left
+    /// out for one node and in keys older than placements): another curve of its backend.
+    pub fn nodes(&self) -> u64 {
+        let [_, _, nodes, _] = PLACEMENT_KEYS;
+        (self.config_key.split(';'))
+            .find_map(|entry| entry.strip_prefix(nodes)?.parse().ok())
+            .unwrap_or(1)
+    }
+
     /// The run's backend and workers in words: `rayon × 4`, `mpi × 4`, or `mpi × 2 ranks
     /// × 2 threads` for MPI ranks on several threads each.
     pub fn placement_label(&self) -> String {
@@ -336,14 +345,18 @@ impl Record {
     }
 }
 
-/// The name of a backend's scaling curve at `threads_per_rank` ([`Record::threads_per_rank`]):
-/// the backend's name, and the threads of each rank where they are more than one (`mpi,
-/// 2 threads/rank`).
-pub fn curve_label(backend: &str, threads_per_rank: u64) -> String {
-    match threads_per_rank {
-        1 => backend.to_owned(),
-        per_rank => format!("{backend}, {per_rank} threads/rank"),
+/// The name of a backend's scaling curve at `threads_per_rank` ([`Record::threads_per_rank`])
+/// on `nodes` ([`Record::nodes`]): the backend's name, then the threads of each rank and
+/// the nodes where they are more than one (`mpi, 2 threads/rank, 2 nodes`).
+pub fn curve_label(backend: &str, threads_per_rank: u64, nodes: u64) -> String {
+    let mut label = backend.to_owned();
+    if threads_per_rank > 1 {
+        label += &format!(", {threads_per_rank} threads/rank");
     }
+    if nodes > 1 {
+        label += &format!(", {nodes} nodes");
+    }
+    label
 }
 
 /// `records` with every copy of a run after its first left out (by [`Record::run_id`]),

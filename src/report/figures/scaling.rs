@@ -187,11 +187,22 @@ fn colour(backend: &BackendScaling) -> RGBColor {
         Some(BackendKind::Mpi) => PALETTE[1],
         None => PALETTE[2],
     };
-    // Each doubling of the threads per rank lightens the backend's colour, so that its
-    // curves stay apart and of one family (darker would run into serial's near-black).
+    // Each doubling of the nodes moves the colour halfway further toward the palette's
+    // spare colour, and each doubling of the threads per rank lightens it, so that a
+    // backend's curves stay apart and of one family (darker would run into serial's
+    // near-black).
+    let toward = PALETTE[2];
+    let moved = 0.5f64.powi(backend.nodes.max(1).ilog2() as i32);
     let kept = 0.6f64.powi(backend.threads_per_rank.max(1).ilog2() as i32);
-    let light = |channel: u8| (255.0 - (255.0 - f64::from(channel)) * kept).round() as u8;
-    RGBColor(light(base.0), light(base.1), light(base.2))
+    let shade = |channel: u8, spare: u8| {
+        let mixed = f64::from(spare) + (f64::from(channel) - f64::from(spare)) * moved;
+        (255.0 - (255.0 - mixed) * kept).round() as u8
+    };
+    RGBColor(
+        shade(base.0, toward.0),
+        shade(base.1, toward.1),
+        shade(base.2, toward.2),
+    )
 }
 
 /// Ticks of a log axis over `low..high`: the first of these mantissas times the powers
