@@ -219,17 +219,22 @@ fn placed_records(placements: &[(usize, usize, usize, f64)]) -> Vec<Record> {
     records
 }
 
+/// A setup's scaling curves: each one's label and its (workers, speedup) points.
+fn curves_of(setup: &analysis::Setup) -> Vec<(String, Vec<(u64, f64)>)> {
+    (setup.backends.iter())
+        .map(|b| {
+            let points = b.points.iter().map(|p| (p.workers, p.speedup)).collect();
+            (b.label(), points)
+        })
+        .collect()
+}
+
 #[test]
 fn ranks_spread_over_two_nodes_are_a_curve_of_their_own() {
     let records = placed_records(&[(1, 1, 1, 0.0100), (4, 1, 1, 0.0040), (4, 1, 2, 0.0050)]);
     let setups = analysis::analyse(&records).unwrap();
     assert_eq!(setups.len(), 1, "one setup: the nodes are not part of it");
-    let curves: Vec<(String, Vec<(u64, f64)>)> = (setups[0].backends.iter())
-        .map(|b| {
-            let points = b.points.iter().map(|p| (p.workers, p.speedup)).collect();
-            (b.label(), points)
-        })
-        .collect();
+    let curves = curves_of(&setups[0]);
     // Pooled, 4 ranks would be one point of 6 runs; apart, each has its median.
     assert_eq!(
         curves,
@@ -251,12 +256,7 @@ fn mpi_ranks_of_two_threads_are_a_curve_of_their_own_never_pooled_with_one_threa
         1,
         "one setup: the placement is not part of it"
     );
-    let curves: Vec<(String, Vec<(u64, f64)>)> = (setups[0].backends.iter())
-        .map(|b| {
-            let points = b.points.iter().map(|p| (p.workers, p.speedup)).collect();
-            (b.label(), points)
-        })
-        .collect();
+    let curves = curves_of(&setups[0]);
     // Both start from one rank of one thread: 0.01 s.
     assert_eq!(
         curves,

@@ -274,10 +274,10 @@ fn keyed_frame(records: &[Record], series_keys: &[String]) -> PolarsResult<DataF
 /// A scaling curve's backend, threads per rank and nodes.
 type Curve = (String, u64, u64);
 
-/// Median, min and max time, repetitions and median FPS per (series, backend, placement),
-/// in first-seen order: (series, curve, point without its derived ratios).
-fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, Curve, Point)>> {
-    let table = frame
+/// The rows of `frame` grouped by series, backend and placement, with the times' median,
+/// list, min and max, the repetitions and the medians of the other figures.
+fn configuration_table(frame: &DataFrame) -> PolarsResult<DataFrame> {
+    frame
         .clone()
         .lazy()
         // By placement, not only the worker count: 2 ranks × 2 threads is not 4 × 1.
@@ -304,7 +304,13 @@ fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, Curve, Poin
                 .alias("messages_per_step"),
             col("bytes_per_step_max").median().alias("bytes_per_step"),
         ])
-        .collect()?;
+        .collect()
+}
+
+/// Median, min and max time, repetitions and median FPS per (series, backend, placement),
+/// in first-seen order: (series, curve, point without its derived ratios).
+fn per_configuration(frame: &DataFrame) -> PolarsResult<Vec<(String, Curve, Point)>> {
+    let table = configuration_table(frame)?;
     let series = table.column("series")?.str()?;
     let backend = table.column("backend")?.str()?;
     let workers = table.column("workers")?.u64()?;
