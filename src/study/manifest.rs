@@ -120,11 +120,11 @@ impl Configuration {
         // placements (and before threaded ranks) still resume.
         let nodes = match self.layout.nodes {
             1 => String::new(),
-            count => format!(";{nodes}{count}"),
+            spread => format!(";{nodes}{spread}"),
         };
         let threads = match threads_per_rank {
             1 => String::new(),
-            count => format!(";{threads}{count}"),
+            per_rank => format!(";{threads}{per_rank}"),
         };
         format!(
             "scene={};{};{backend}{};{workers}{count}{nodes}{threads}{when_set}",
@@ -568,8 +568,8 @@ fn weak_n(input: &SceneInput, overrides: &Overrides, workers: usize) -> Result<i
     })
 }
 
-/// The memory footprint of `scene` (its `input`) with `overrides` on `backend` and
-/// `workers`, once it is a valid scene (the same checks as `collide simulate`) that fits
+/// The memory footprint of `scene` (its `input`) with `overrides` on `backend` in
+/// `ranks` processes, once it is a valid scene (the same checks as `collide simulate`) that fits
 /// the machine and that the backend can run; errors point at its scene entry (`offset`)
 /// or at the swept key that asks for what the backend cannot do.
 fn checked(
@@ -578,7 +578,7 @@ fn checked(
     offset: usize,
     (scene, input): (&str, &SceneInput),
     overrides: &Overrides,
-    (backend, workers): (BackendKind, usize),
+    (backend, ranks): (BackendKind, usize),
     machine: &Machine,
 ) -> Result<Footprint, ManifestError> {
     let in_scene = |message: String| {
@@ -590,7 +590,7 @@ fn checked(
     let spec = load_scene(input, overrides).map_err(in_scene)?;
     let capabilities = backend.capabilities();
     let copies = match capabilities.scene_in_every_process {
-        true => spec.whole_scene_copies(backend.placement(workers).ranks),
+        true => spec.whole_scene_copies(ranks),
         false => 1,
     };
     let footprint = spec.footprint(copies);
