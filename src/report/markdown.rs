@@ -786,19 +786,19 @@ fn failure_line(out: &mut String, group: &PackingGroup) {
                 out,
                 "The step method fails at v_rms·dt/r ≥ {:.3}{}.\n",
                 worst_ok.step_over_radius,
-                largest_ok.map_or_else(String::new, |p| match &group.reference {
-                    Some(reference) => format!(
-                        "; the largest passing step is v_rms·dt/r = {:.3} (Z error {:+.2}%, \
-                         {:.1}× the event method's speed)",
-                        p.step_over_radius,
-                        100.0 * p.z_error,
-                        p.sim_time_per_s / reference.sim_time_per_s
-                    ),
-                    None => format!(
-                        "; the largest passing step is v_rms·dt/r = {:.3} (no event reference \
-                         to measure its errors against)",
+                largest_ok.map_or_else(String::new, |p| {
+                    let against = match &group.reference {
+                        Some(reference) => format!(
+                            "Z error {:+.2}%, {:.1}× the event method's speed",
+                            100.0 * p.z_error,
+                            p.sim_time_per_s / reference.sim_time_per_s
+                        ),
+                        None => "no event reference to measure its errors against".to_owned(),
+                    };
+                    format!(
+                        "; the largest passing step is v_rms·dt/r = {:.3} ({against})",
                         p.step_over_radius
-                    ),
+                    )
                 })
             );
         }
